@@ -1,0 +1,50 @@
+"""mrfpe: Markov random field parameter estimation by sampling.
+
+The front doors are :func:`sample` (run a registered sampler on a target) and
+:func:`distance` (compare two posteriors). Submodules are imported lazily so
+that ``import mrfpe`` and the command line stay fast.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+__version__ = "0.1.0"
+
+_SUBMODULES = {
+    "brdf", "geometry", "lattice", "shading", "scene", "synthetic", "targets", "samplers",
+    "posterior", "distances", "classify", "stereo", "testing", "study", "mrf",
+}
+
+
+def sample(name: str, target: Any, *, seed: int | None = None, progress: bool = False,
+           callback: Any = None, **config: Any):
+    """Run sampler ``name`` on ``target`` and return its posterior Dataset.
+
+    ``config`` holds the sampler's keyword settings, e.g.
+    ``mrfpe.sample("pmc", target, seed=0, n_samples=1000, n_iterations=20)``.
+    """
+    from mrfpe.samplers import get
+
+    return get(name)(**config).run(target, seed=seed, progress=progress, callback=callback)
+
+
+def distance(name: str, a: Any, b: Any, **params: Any) -> float:
+    """Distance ``name`` between posteriors ``a`` and ``b`` (lower = more alike)."""
+    from mrfpe.distances import distance as _distance
+
+    return _distance(name, a, b, **params)
+
+
+def __getattr__(name: str) -> Any:
+    if name in _SUBMODULES:
+        return importlib.import_module(f"mrfpe.{name}")
+    if name == "Scene":
+        from mrfpe.scene import Scene
+
+        return Scene
+    raise AttributeError(f"module 'mrfpe' has no attribute {name!r}")
+
+
+__all__ = ["__version__", "distance", "sample"]

@@ -1,0 +1,5 @@
+import sys
+
+from mrfpe.cli import main
+
+sys.exit(main())

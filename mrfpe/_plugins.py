@@ -1,0 +1,145 @@
+"""Entry-point registries shared by samplers and distances.
+
+Modelled on xarray's backend plugins: every extension (built-in or third-party)
+is a plain class registered under an entry-point group in some package's
+``pyproject.toml``. Discovery imports each entry point once, validates its
+interface, and records failures as *broken* entries instead of raising, so one
+bad plugin never takes down the others or the command line.
+
+Plugin modules must import heavy optional dependencies lazily (inside
+``run``/``__call__``), so that listing stays cheap.
+"""
+
+from __future__ import annotations
+
+import importlib.metadata as md
+import inspect
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+__all__ = ["PluginInfo", "Registry"]
+
+
+@dataclass(frozen=True)
+class PluginInfo:
+    """One registered plugin, working or broken."""
+
+    name: str
+    target: str  # "module:attr" of the entry point
+    package: str
+    version: str
+    description: str
+    obj: Any = None
+    error: str | None = None
+
+    @property
+    def ok(self) -> bool:
+        return self.error is None
+
+
+def first_doc_line(obj: Any) -> str:
+    """The first non-empty line of ``obj``'s docstring ('' if none)."""
+    doc = inspect.getdoc(obj) or ""
+    return next((line.strip() for line in doc.splitlines() if line.strip()), "")
+
+
+class Registry:
+    """Discover, validate and look up the plugins of one entry-point group.
+
+    Parameters
+    ----------
+    group
+        Entry-point group, e.g. ``"mrfpe.samplers"``.
+    kind
+        Human name used in messages, e.g. ``"sampler"``.
+    validate
+        Called with the loaded object; raises ``TypeError`` (or any exception)
+        with a message when the object does not implement the interface.
+    """
+
+    def __init__(self, group: str, kind: str, validate: Callable[[Any], None]):
+        self.group = group
+        self.kind = kind
+        self._validate = validate
+        self._entries: dict[str, PluginInfo] | None = None
+        self._local: dict[str, PluginInfo] = {}
+
+    # -- discovery -------------------------------------------------------
+    def _load(self, ep: md.EntryPoint) -> PluginInfo:
+        dist = getattr(ep, "dist", None)
+        package = dist.metadata["Name"] if dist is not None else "?"
+        version = dist.version if dist is not None else "?"
+        try:
+            obj = ep.load()
+            self._validate(obj)
+        except Exception as exc:  # a broken plugin must not break discovery
+            return PluginInfo(ep.name, ep.value, package, version, "", None,
+                              f"{type(exc).__name__}: {exc}")
+        return PluginInfo(ep.name, ep.value, package, version, first_doc_line(obj), obj)
+
+    def entries(self, refresh: bool = False) -> dict[str, PluginInfo]:
+        """Every plugin of the group, broken ones included, by name."""
+        if self._entries is None or refresh:
+            found: dict[str, PluginInfo] = {}
+            seen: set[tuple[str, str]] = set()
+            for ep in sorted(md.entry_points(group=self.group), key=lambda e: e.name):
+                if (ep.name, ep.value) in seen:  # same dist seen twice on sys.path
+                    continue
+                seen.add((ep.name, ep.value))
+                info = self._load(ep)
+                if ep.name in found:
+                    other = found[ep.name]
+                    msg = (f"duplicate {self.kind} name {ep.name!r}: registered by "
+                           f"{other.package} ({other.target}) and {info.package} ({info.target})")
+                    info = PluginInfo(info.name, info.target, info.package, info.version,
+                                      info.description, None, msg)
+                    found[f"{ep.name} [{info.package}]"] = info
+                    continue
+                found[ep.name] = info
+            self._entries = found
+        return {**self._entries, **self._local}
+
+    def register(self, name: str, obj: Any) -> None:
+        """Register ``obj`` in this process only (tests, notebooks)."""
+        self._validate(obj)
+        self._local[name] = PluginInfo(name, f"{obj.__module__}:{obj.__qualname__}",
+                                       "(local)", "", first_doc_line(obj), obj)
+
+    def unregister(self, name: str) -> None:
+        self._local.pop(name, None)
+
+    def available(self) -> dict[str, PluginInfo]:
+        """The working plugins, by name."""
+        return {k: v for k, v in self.entries().items() if v.ok}
+
+    def broken(self) -> dict[str, PluginInfo]:
+        """The broken plugins, by name, each with its error."""
+        return {k: v for k, v in self.entries().items() if not v.ok}
+
+    def get(self, name: str) -> Any:
+        """The plugin object registered as ``name``."""
+        entries = self.entries()
+        info = entries.get(name)
+        if info is None:
+            names = ", ".join(sorted(self.available())) or "(none)"
+            raise ValueError(f"unknown {self.kind} {name!r}; available: {names}")
+        if not info.ok:
+            raise ValueError(f"{self.kind} {name!r} is broken: {info.error}")
+        return info.obj
+
+    def table(self, extra: Callable[[PluginInfo], str] | None = None) -> str:
+        """A plain-text table of all plugins (name, package, version, description)."""
+        rows = []
+        for info in self.entries().values():
+            desc = info.description if info.ok else f"BROKEN: {info.error}"
+            if extra is not None and info.ok:
+                desc = f"{extra(info)}  {desc}".strip()
+            rows.append((info.name, info.package, info.version, desc))
+        if not rows:
+            return f"no {self.kind}s registered under {self.group!r}"
+        w = [max(len(r[i]) for r in rows + [("name", "package", "version", "")]) for i in range(3)]
+        head = f"{'name':<{w[0]}}  {'package':<{w[1]}}  {'version':<{w[2]}}  description"
+        lines = [head, "-" * len(head)]
+        lines += [f"{a:<{w[0]}}  {b:<{w[1]}}  {c:<{w[2]}}  {d}" for a, b, c, d in rows]
+        return "\n".join(lines)

@@ -7,6 +7,12 @@ optional ``history_theta(step, sample, param)`` /
 ``history_log_weight(step, sample)``; attributes ``sampler``, ``config``
 (JSON), ``seed``, ``target`` (JSON), ``mrfpe_version``, ``n_target_evals``,
 ``wall_time_s``.
+
+Beyond :func:`build` (which every sampler goes through) this module holds the
+statistics of a weighted sample set (:func:`weighted_mean`, :func:`weighted_cov`,
+:func:`weighted_quantiles`, :func:`ess`, :func:`perplexity`, :func:`map_estimate`),
+:func:`resample` to equal weights, exact netCDF :func:`save` / :func:`load`,
+:func:`summary`, :func:`to_arviz` and the schema check :func:`validate`.
 """
 
 from __future__ import annotations
@@ -18,7 +24,11 @@ import numpy as np
 import xarray as xr
 from scipy.special import logsumexp
 
-__all__ = ["build", "normalise_log_weights", "weighted_cov", "weighted_mean", "weights"]
+__all__ = [
+    "build", "ess", "load", "map_estimate", "normalise_log_weights", "perplexity", "resample",
+    "save", "summary", "to_arviz", "validate", "weighted_cov", "weighted_mean",
+    "weighted_quantiles", "weights",
+]
 
 
 def normalise_log_weights(log_w: Any) -> np.ndarray:
@@ -32,12 +42,13 @@ def normalise_log_weights(log_w: Any) -> np.ndarray:
     lw[np.isnan(lw)] = -np.inf
     if lw.size == 0:
         return lw
+    if np.isposinf(lw).any():  # +inf spikes dominate every finite weight: equal mass on them
+        return np.where(np.isposinf(lw), -np.log(np.isposinf(lw).sum()), -np.inf)
     if not np.isfinite(lw).any():
-        if np.isposinf(lw).any():  # +inf spikes: equal mass on the spikes
-            return np.where(np.isposinf(lw), -np.log(np.isposinf(lw).sum()), -np.inf)
         return np.full_like(lw, -np.log(lw.size))
-    lw[np.isposinf(lw)] = np.nanmax(lw[np.isfinite(lw)])  # pragma: no cover - defensive
-    return lw - logsumexp(lw)
+    with np.errstate(over="ignore"):  # huge gaps underflow to -inf, which is the answer
+        lw = lw - np.max(lw)
+        return lw - np.log(np.sum(np.exp(lw)))
 
 
 def weights(post: xr.Dataset) -> np.ndarray:
@@ -150,3 +161,310 @@ def build(
         **(extra_attrs or {}),
     }
     return xr.Dataset(data, coords={"param": names, "step": np.arange(n_steps)}, attrs=attrs)
+
+
+# --------------------------------------------------------------------------
+# Statistics of a weighted sample set
+# --------------------------------------------------------------------------
+def _log_weights(post_or_log_w: Any) -> np.ndarray:
+    if isinstance(post_or_log_w, xr.Dataset):
+        return normalise_log_weights(post_or_log_w["log_weight"].values)
+    return normalise_log_weights(np.asarray(post_or_log_w, dtype=np.float64).reshape(-1))
+
+
+def ess(post_or_log_w: Any) -> float:
+    """Kish's effective sample size ``(Σw)² / Σw²`` = ``1 / Σ w̃²`` (w̃ normalised).
+
+    Accepts a posterior Dataset or an array of (unnormalised) log weights.
+    Equal weights give the sample count; a single spike gives 1.
+    """
+    lw = _log_weights(post_or_log_w)
+    if lw.size == 0:
+        return 0.0
+    return float(np.exp(-logsumexp(2.0 * lw)))
+
+
+def perplexity(post_or_log_w: Any, *, normalised: bool = True) -> float:
+    """Perplexity ``exp(H)`` of the normalised weights, ``H = -Σ w̃ log w̃``.
+
+    With ``normalised=True`` (default) it is divided by the sample count and
+    lies in (0, 1], the criterion Cappé et al. use for PMC: 1 for equal
+    weights, ``1/S`` for a single spike.
+    """
+    lw = _log_weights(post_or_log_w)
+    if lw.size == 0:
+        return 0.0
+    w = np.exp(lw)
+    h = -np.sum(w[w > 0] * lw[w > 0])
+    return float(np.exp(h) / (lw.size if normalised else 1))
+
+
+def weighted_quantiles(post: xr.Dataset, q: Any) -> np.ndarray:
+    """Importance-weighted quantiles of each parameter, shape (len(q), d).
+
+    Uses the inverse of the weighted empirical CDF with linear interpolation
+    between the midpoints of the sorted samples' weight masses (so equal weights
+    give the Hazen quantiles, numpy's ``method="hazen"``); levels outside the
+    first/last midpoint clamp to the smallest/largest sample.
+    """
+    qs = np.atleast_1d(np.asarray(q, dtype=np.float64))
+    if qs.ndim != 1 or np.any(~(qs >= 0) | ~(qs <= 1)):
+        raise ValueError(f"q must be quantile levels in [0, 1]; got {q!r}")
+    w = weights(post)
+    theta = post["theta"].values
+    out = np.empty((qs.size, theta.shape[1]))
+    for j in range(theta.shape[1]):  # d is small; each column is one sort
+        order = np.argsort(theta[:, j], kind="stable")
+        x, wj = theta[order, j], w[order]
+        keep = wj > 0
+        x, wj = x[keep], wj[keep]
+        mid = np.cumsum(wj) - 0.5 * wj
+        out[:, j] = np.interp(qs, mid, x)
+    return out
+
+
+def map_estimate(post: xr.Dataset) -> tuple[np.ndarray, float]:
+    """The maximum-a-posteriori point and its target log density.
+
+    The last entry of the best-so-far trace (``map_theta``/``map_log_target``)
+    if it is finite, else the final sample with the highest ``log_target``.
+    """
+    lt_trace = post["map_log_target"].values
+    if lt_trace.size and np.isfinite(lt_trace[-1]):
+        return post["map_theta"].values[-1].copy(), float(lt_trace[-1])
+    lt = np.where(np.isnan(post["log_target"].values), -np.inf, post["log_target"].values)
+    best = int(np.argmax(lt))
+    return post["theta"].values[best].copy(), float(lt[best])
+
+
+def resample(post: xr.Dataset, n: int | None = None, method: str = "systematic",
+             seed: int | None = None) -> xr.Dataset:
+    """An equal-weight posterior drawn from ``post``'s weighted samples.
+
+    Parameters
+    ----------
+    n : number of draws (default: the sample count of ``post``).
+    method : ``"multinomial"``, ``"systematic"``, ``"stratified"`` or ``"residual"``
+        (see :mod:`mrfpe.resampling`).
+    seed : seed of the resampling draw.
+
+    The trace variables and attributes are kept; the history variables, whose
+    ``sample`` axis indexes other sets, are dropped. The attribute
+    ``resampled`` records the method, count and seed.
+    """
+    from mrfpe.resampling import resample as _resample
+
+    n = post.sizes["sample"] if n is None else n
+    if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 1:
+        raise ValueError(f"n must be a positive integer; got {n!r}")
+    idx = _resample(post["log_weight"].values, int(n), method, np.random.default_rng(seed))
+    out = post.drop_vars([k for k in post.data_vars if k.startswith("history_")]).isel(sample=idx)
+    out["log_weight"] = (("sample",), np.full(int(n), -np.log(int(n))))
+    out.attrs = dict(post.attrs)
+    out.attrs["resampled"] = _json({"method": method, "n": int(n), "seed": seed})
+    return out
+
+
+# --------------------------------------------------------------------------
+# netCDF round trip
+# --------------------------------------------------------------------------
+_JSON_ATTRS = "_mrfpe_json_attrs"
+
+
+def _is_nc_attr(v: Any) -> bool:
+    if isinstance(v, bool | np.bool_):
+        return False
+    if isinstance(v, str | int | float | np.integer | np.floating):
+        return True
+    if isinstance(v, np.ndarray | list | tuple):
+        a = np.asarray(v)
+        return a.ndim == 1 and a.size > 0 and a.dtype.kind in "iuf"
+    return False
+
+
+def _encode_attrs(attrs: dict) -> dict:
+    """netCDF attributes; values netCDF cannot hold (bool, None, dict) go as JSON."""
+    out, encoded = {}, []
+    for k, v in attrs.items():
+        if _is_nc_attr(v):
+            out[k] = v
+        else:
+            out[k] = json.dumps(v.item() if isinstance(v, np.generic) else v)
+            encoded.append(k)
+    if encoded:
+        out[_JSON_ATTRS] = json.dumps(encoded)
+    return out
+
+
+def _decode_attrs(attrs: dict) -> dict:
+    attrs = dict(attrs)
+    encoded = json.loads(attrs.pop(_JSON_ATTRS, "[]"))
+    out = {}
+    for k, v in attrs.items():
+        if k in encoded:
+            out[k] = json.loads(v)
+        elif isinstance(v, np.generic):
+            out[k] = v.item()  # netCDF returns numpy scalars; build() stores python ones
+        else:
+            out[k] = v
+    return out
+
+
+def save(post: xr.Dataset, path: Any) -> None:
+    """Write a posterior to netCDF4 so that :func:`load` returns it unchanged.
+
+    Float variables keep NaN and ±inf (no fill-value masking on read), string
+    coordinates come back as fixed-width unicode, and attributes netCDF cannot
+    store (bool, None, dicts, lists of strings) are stored as JSON and decoded.
+    """
+    ds = post.copy()
+    ds.attrs = _encode_attrs(post.attrs)
+    for name, var in ds.variables.items():
+        var.attrs = _encode_attrs(post[name].attrs)
+        var.encoding = {}
+        if var.dtype.kind == "f":
+            var.encoding["_FillValue"] = None  # NaN is data, not "missing"
+    ds.to_netcdf(path, engine="netcdf4", format="NETCDF4")
+
+
+def load(path: Any) -> xr.Dataset:
+    """Read a posterior written by :func:`save` (fully into memory; the file is closed)."""
+    with xr.open_dataset(path, engine="netcdf4", mask_and_scale=False, decode_times=False,
+                         decode_timedelta=False) as f:
+        ds = f.load()
+    ds.attrs = _decode_attrs(ds.attrs)
+    for name, var in ds.variables.items():
+        var.attrs = _decode_attrs(var.attrs)
+        var.encoding = {}
+        if var.dtype.kind == "O":  # variable-length strings -> fixed-width unicode
+            ds[name] = var.astype(str)
+    for name in list(ds.coords):
+        if ds[name].dtype.kind == "O":
+            ds = ds.assign_coords({name: ds[name].values.astype(str)})
+    return ds
+
+
+# --------------------------------------------------------------------------
+# Reporting, conversion, validation
+# --------------------------------------------------------------------------
+def summary(post: xr.Dataset) -> str:
+    """A plain-text report: sampler, ESS, perplexity, evaluations, time, and per
+    parameter the weighted mean ± sd, the 5/50/95 % quantiles and the MAP."""
+    mean, cov = weighted_mean(post), weighted_cov(post)
+    sd = np.sqrt(np.clip(np.diag(cov), 0, None))
+    q = weighted_quantiles(post, [0.05, 0.5, 0.95])
+    m, m_lt = map_estimate(post)
+    names = [str(p) for p in post["param"].values]
+    w = max(9, *(len(n) for n in names))
+    lines = [
+        f"sampler {post.attrs.get('sampler', '?')}: {post.sizes['sample']} samples, "
+        f"ESS {ess(post):.1f}, perplexity {perplexity(post):.3f}, "
+        f"{post.attrs.get('n_target_evals', float('nan')):.4g} target evaluations, "
+        f"{post.attrs.get('wall_time_s', float('nan')):.3g} s; MAP log target {m_lt:.6g}",
+        f"{'param':<{w}} {'mean':>10} {'sd':>10} {'5%':>10} {'50%':>10} {'95%':>10} {'MAP':>10}",
+    ]
+    for j, n in enumerate(names):
+        lines.append(f"{n:<{w}} {mean[j]:>10.4g} {sd[j]:>10.4g} {q[0, j]:>10.4g} "
+                     f"{q[1, j]:>10.4g} {q[2, j]:>10.4g} {m[j]:>10.4g}")
+    return "\n".join(lines)
+
+
+def to_arviz(post: xr.Dataset, *, resample_to_equal: bool = False, seed: int | None = None):
+    """Convert to ``arviz.InferenceData`` (one chain, draws = samples).
+
+    ArviZ has no place for importance weights and treats every draw as equally
+    weighted. The weights are therefore kept as the ``sample_stats`` variable
+    ``log_weight`` (normalised, logsumexp = 0) next to ``lp`` (the target log
+    density), and are NOT applied by ArviZ's statistics or plots. For weighted
+    samplers pass ``resample_to_equal=True`` (systematic resampling with
+    ``seed``) to get equal-weight draws that ArviZ summarises correctly.
+    The ``posterior`` group holds ``theta(chain, draw, param)``; the MAP trace
+    and ESS per step go to a ``trace`` group; attributes are copied.
+    """
+    import arviz as az
+
+    src = resample(post, seed=seed) if resample_to_equal else post
+    theta = src["theta"].values[None]
+    coords = {"param": [str(p) for p in src["param"].values]}
+    posterior = xr.Dataset({"theta": (("chain", "draw", "param"), theta)},
+                           coords={**coords, "chain": [0], "draw": np.arange(theta.shape[1])},
+                           attrs=dict(src.attrs))
+    stats = xr.Dataset({"log_weight": (("chain", "draw"), src["log_weight"].values[None]),
+                        "lp": (("chain", "draw"), src["log_target"].values[None])},
+                       coords={"chain": [0], "draw": np.arange(theta.shape[1])})
+    trace = src[["map_theta", "map_log_target", "ess"]]
+    import warnings
+
+    with warnings.catch_warnings():  # arviz warns about the non-standard "trace" group
+        warnings.simplefilter("ignore", UserWarning)
+        return az.InferenceData(posterior=posterior, sample_stats=stats, trace=trace)
+
+
+_REQUIRED_VARS = {
+    "theta": ("sample", "param"), "log_weight": ("sample",), "log_target": ("sample",),
+    "map_theta": ("step", "param"), "map_log_target": ("step",), "ess": ("step",),
+}
+_OPTIONAL_VARS = {"history_theta": ("step", "sample", "param"),
+                  "history_log_weight": ("step", "sample")}
+_REQUIRED_ATTRS = {"sampler": str, "config": str, "seed": int, "target": str,
+                   "mrfpe_version": str, "n_target_evals": float, "wall_time_s": float}
+
+
+def validate(post: Any) -> None:
+    """Check that ``post`` follows the posterior schema of DESIGN.md.
+
+    Raises
+    ------
+    ValueError
+        Naming the first problem found: missing or mis-dimensioned variable,
+        non-float data, NaN samples, log weights that are not normalised, an
+        ESS outside [0, S], a ``param`` coordinate that does not match, or a
+        missing / mistyped / non-JSON attribute.
+    """
+    if not isinstance(post, xr.Dataset):
+        raise ValueError(f"a posterior must be an xarray.Dataset; got {type(post).__name__}")
+    for name, dims in {**_REQUIRED_VARS, **_OPTIONAL_VARS}.items():
+        if name not in post:
+            if name in _REQUIRED_VARS:
+                raise ValueError(f"posterior lacks the variable {name!r}")
+            continue
+        if post[name].dims != dims:
+            raise ValueError(f"{name} must have dims {dims}; got {post[name].dims}")
+        if post[name].dtype != np.float64:
+            raise ValueError(f"{name} must be float64; got {post[name].dtype}")
+    S, d = post.sizes["sample"], post.sizes["param"]
+    if S < 1 or d < 1:
+        raise ValueError(f"posterior must have samples and parameters; got S={S}, d={d}")
+    if "param" not in post.coords or len(set(map(str, post["param"].values))) != d:
+        raise ValueError("the param coordinate must hold d distinct parameter names")
+    if np.isnan(post["theta"].values).any():
+        raise ValueError("theta contains NaN")
+    lw = post["log_weight"].values
+    if np.isnan(lw).any() or np.isposinf(lw).any():
+        raise ValueError("log_weight contains NaN or +inf")
+    total = logsumexp(lw)
+    if not abs(total) < 1e-6:
+        raise ValueError(f"log_weight must be normalised (logsumexp = 0); got {total:.3g}")
+    if np.isnan(post["log_target"].values).any():
+        raise ValueError("log_target contains NaN (use -inf for impossible samples)")
+    e = post["ess"].values
+    if np.any((e < 0) | (e > S * (1 + 1e-9)) & ~np.isnan(e)):
+        raise ValueError(f"ess must lie in [0, {S}] or be NaN; got {e}")
+    if "step" not in post.coords:
+        raise ValueError("posterior lacks the step coordinate")
+    for key, typ in _REQUIRED_ATTRS.items():
+        if key not in post.attrs:
+            raise ValueError(f"posterior lacks the attribute {key!r}")
+        v = post.attrs[key]
+        ok = (isinstance(v, str) if typ is str else
+              isinstance(v, int | np.integer) and not isinstance(v, bool) if typ is int else
+              isinstance(v, int | float | np.integer | np.floating) and not isinstance(v, bool))
+        if not ok:
+            raise ValueError(f"attribute {key!r} must be {typ.__name__}; got {v!r}")
+    for key in ("config", "target"):
+        try:
+            json.loads(post.attrs[key])
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"attribute {key!r} must be JSON: {exc}") from None
+    if not post.attrs["n_target_evals"] >= 0:
+        raise ValueError(f"n_target_evals must be >= 0; got {post.attrs['n_target_evals']}")

@@ -20,9 +20,9 @@ Callback = Callable[[int, dict], Any]
 
 def check_positive_int(name: str, value: Any, minimum: int = 1) -> int:
     """Return ``value`` as int, or raise ValueError naming ``name``."""
-    if isinstance(value, bool) or not isinstance(value, (int,)) and not (
+    if isinstance(value, bool) or (not isinstance(value, (int,)) and not (
         hasattr(value, "__index__")
-    ):
+    )):
         raise ValueError(f"{name} must be an integer >= {minimum}; got {value!r}")
     value = int(value)
     if value < minimum:
@@ -66,8 +66,8 @@ class Sampler:
     def config_names(cls) -> list[str]:
         sig = inspect.signature(cls.__init__)
         return [p.name for p in sig.parameters.values()
-                if p.name != "self" and p.kind is p.KEYWORD_ONLY or
-                p.kind is p.POSITIONAL_OR_KEYWORD and p.name != "self"]
+                if (p.name != "self" and p.kind is p.KEYWORD_ONLY) or
+                (p.kind is p.POSITIONAL_OR_KEYWORD and p.name != "self")]
 
     def get_config(self) -> dict[str, Any]:
         """The constructor's keyword arguments and their current values."""

@@ -1,0 +1,281 @@
+"""Construction and log_prob cost of the ``pls`` target (issue 2 "Measure and report", issue 6).
+
+For a ``--shape`` (default 100 x 100) synthetic scene with 10, 20, 30 and 40
+labels it measures, per BRDF model:
+
+* construction time of ``mrfpe.targets.get("pls", scene)`` (fresh tables) and
+  the target's memory (its precomputed tables) and the construction's peak
+  traced allocation (``tracemalloc``);
+* ``log_prob`` wall time for batches of 1, 64 and 1000 parameter vectors (best
+  of ``--repeat``) and the CPU time of the 1000 batch;
+* ns per BRDF evaluation (the log-sum-exp over labels included in the time):
+  wall-clock on this machine's threads, and CPU time divided by the thread
+  count -- the wall time the same work takes on that many idle cores (the two
+  differ when other processes share the machine);
+* a comparison kernel: the bare minimum loop doing the same number of Ward
+  evaluations (same features, same vectorised exp) and one log-sum-exp per
+  (node, particle) over the labels, with no data-term structure -- how close
+  ``log_prob`` is to what this machine can do (issue 6 item 3);
+* optionally (``--pmc``) the wall time of PMC 1000 x 20 (thesis Table 8.12: 4
+  min at 10 labels, 16 min at 40).
+
+Usage::
+
+    python benchmarks/bench_targets.py                     # ward, 10/20/30/40 labels
+    python benchmarks/bench_targets.py --brdf ward phong --pmc
+    python benchmarks/bench_targets.py --labels 10 --shape 50 50 --no-write
+    python benchmarks/bench_targets.py --dtype float64 float32
+
+Results are printed and, unless ``--no-write``, appended to
+``benchmarks/RESULTS.md`` as a dated section with machine and versions.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import os
+import platform
+import sys
+import time
+import tracemalloc
+from pathlib import Path
+
+import numpy as np
+
+THETA = {"ward": [0.7, 0.4, 0.45], "phong": [0.5, 0.4, 0.3], "lambertian": [0.7],
+         "ward_aniso": [0.7, 0.4, 0.45, 0.3], "phong_aniso": [0.5, 0.4, 0.3, 0.5]}
+SURFACE = {"ward": "smooth", "ward_aniso": "smooth", "lambertian": "smooth"}
+
+
+def machine() -> dict:
+    import numba
+    import scipy
+
+    import mrfpe
+
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    load = os.getloadavg() if hasattr(os, "getloadavg") else (float("nan"),) * 3
+    return {
+        "date": _dt.datetime.now().isoformat(timespec="seconds"),
+        "cpu": cpu, "cores": os.cpu_count(), "numba_threads": numba.get_num_threads(),
+        "threading_layer": _threading_layer(), "python": platform.python_version(),
+        "numpy": np.__version__, "numba": numba.__version__, "scipy": scipy.__version__,
+        "mrfpe": mrfpe.__version__, "platform": platform.platform(),
+        "load_avg": " ".join(f"{x:.2f}" for x in load),
+    }
+
+
+def _threading_layer() -> str:
+    import numba
+
+    try:
+        return numba.threading_layer()
+    except ValueError:  # no parallel region has run yet
+        return str(numba.config.THREADING_LAYER)
+
+
+def _best(fn, repeat: int) -> tuple[float, float]:
+    """Best wall and CPU seconds of ``repeat`` calls of ``fn``."""
+    wall, cpu = np.inf, np.inf
+    for _ in range(repeat):
+        w0, c0 = time.perf_counter(), time.process_time()
+        fn()
+        wall = min(wall, time.perf_counter() - w0)
+        cpu = min(cpu, time.process_time() - c0)
+    return wall, cpu
+
+
+def comparison_kernel():
+    """The bare-minimum loop for the same Ward evaluations and label log-sum-exps."""
+    from numba import njit, prange
+
+    from mrfpe.targets.kernels import _FM, vexp, vlog
+
+    @njit(parallel=True, fastmath=_FM, error_model="numpy")
+    def floor(coef, feat, n_nodes, B, nv, bl, out):
+        npad = coef.shape[1]
+        nblk = npad // bl
+        chunk = 64
+        n_chunks = -(-n_nodes // chunk)
+        part = np.zeros((n_chunks, npad))
+        for c in prange(n_chunks):
+            en = np.empty((B, bl))
+            ssum = np.empty(bl)
+            c0 = np.empty(bl)
+            c1 = np.empty(bl)
+            e1 = np.empty(bl)
+            for blk in range(nblk):
+                q0 = blk * bl
+                for p in range(bl):
+                    c0[p] = coef[0, q0 + p]
+                    c1[p] = coef[1, q0 + p]
+                    e1[p] = coef[3, q0 + p]
+                    ssum[p] = 0.0
+                for i in range(c * chunk, min(n_nodes, (c + 1) * chunk)):
+                    base = i * B * nv
+                    for s in range(B):
+                        es = en[s]
+                        for p in range(bl):
+                            es[p] = 0.0
+                        for t in range(nv):
+                            e = base + t * B + s
+                            f0 = feat[0, e]
+                            f1 = feat[1, e]
+                            g1 = feat[3, e]
+                            for p in range(bl):
+                                es[p] += c0[p] * f0 + c1[p] * f1 * vexp(e1[p] * g1)
+                    for p in range(bl):
+                        c0[p] = 0.0  # reuse as the label sum
+                    for s in range(B):
+                        es = en[s]
+                        for p in range(bl):
+                            c0[p] += vexp(-es[p])
+                    for p in range(bl):
+                        ssum[p] += vlog(c0[p])
+                        c0[p] = coef[0, q0 + p]
+                for p in range(bl):
+                    part[c, q0 + p] = ssum[p]
+        for c in range(n_chunks):
+            for q in range(npad):
+                out[q] += part[c, q]
+
+    return floor
+
+
+def bench(brdf: str, shape: tuple[int, int], labels: list[int], repeat: int, pmc: bool,
+          floor_kernel, dtype: str = "float64") -> list[dict]:
+    import mrfpe
+    from mrfpe.synthetic import make_scene
+    from mrfpe.targets import reflectance
+    from mrfpe.targets.kernels import block_size
+
+    model = mrfpe.brdf.get(brdf)
+    import numba
+
+    threads = numba.get_num_threads()
+    rng = np.random.default_rng(0)
+    theta = rng.random((1000, model.d))
+    rows = []
+    for B in labels:
+        scene = make_scene(brdf=brdf, theta=model.to_natural(np.array(THETA[brdf])),
+                           shape=shape, n_labels=B, surface=SURFACE.get(brdf, "jagged"), seed=0)
+        mrfpe.targets.get("pls", make_scene(brdf=brdf, theta=model.to_natural(
+            np.array(THETA[brdf])), shape=(2, 2), n_labels=2, seed=0), dtype=dtype).log_prob(
+            theta[:70])
+        tracemalloc.start()
+        t0 = time.perf_counter()
+        target = mrfpe.targets.get("pls", scene, dtype=dtype)
+        t_build = time.perf_counter() - t0
+        _, peak = tracemalloc.get_traced_memory()
+        tracemalloc.stop()
+        evals = target._tables.brdf_evals_per_particle
+        row = {"brdf": brdf, "dtype": dtype, "labels": B, "build_s": t_build,
+               "target_MiB": target.nbytes / 2**20, "build_peak_MiB": peak / 2**20,
+               "evals_per_particle": evals}
+        for n in (1, 64, 1000):
+            target.log_prob(theta[:n])  # warm-up (compilation, page faults)
+            wall, cpu = _best(lambda n=n, t=target: t.log_prob(theta[:n]), repeat)
+            row[f"lp{n}_ms"] = wall * 1e3
+            if n == 1000:
+                row["lp1000_cpu_ms"] = cpu * 1e3
+                row["ns_eval_wall"] = wall / (n * evals) * 1e9
+                row["ns_eval_cpu_per_thread"] = cpu / (n * evals) * 1e9 / threads
+        # comparison kernel: same number of Ward evaluations and label LSEs
+        nv = max(1, round(target._tables.var_feat.shape[1] / (target._tables.n_nodes * B)))
+        feat = np.ascontiguousarray(target._tables.var_feat)
+        nn = feat.shape[1] // (B * nv)
+        coefm = reflectance.coefficients("ward", np.tile([0.5, 0.5, 0.2], (1000, 1)))
+        bl = block_size(1000)
+        npad = -(-1000 // bl) * bl
+        ct = np.ascontiguousarray(np.resize(coefm, (npad, 5)).T)
+        out = np.empty(npad)
+        floor_kernel(ct, feat, nn, B, nv, bl, out)
+        args = (ct, feat, nn, B, nv, bl, out)
+        wall, _ = _best(lambda a=args: floor_kernel(*a), repeat)
+        row["floor_ms"] = wall * 1e3 * evals / (nn * B * nv)
+        row["ratio_to_floor"] = row["lp1000_ms"] / row["floor_ms"]
+        if pmc:
+            t0 = time.perf_counter()
+            mrfpe.sample("pmc", target, seed=0, n_samples=1000, n_iterations=20)
+            row["pmc_1000x20_s"] = time.perf_counter() - t0
+        rows.append(row)
+        print(_fmt_row(row), flush=True)
+    return rows
+
+
+COLUMNS = [
+    ("brdf", "brdf", "{}"), ("dtype", "dtype", "{}"), ("labels", "B", "{}"),
+    ("build_s", "build s", "{:.2f}"),
+    ("target_MiB", "target MiB", "{:.0f}"), ("build_peak_MiB", "build peak MiB", "{:.0f}"),
+    ("lp1_ms", "lp(1) ms", "{:.2f}"), ("lp64_ms", "lp(64) ms", "{:.1f}"),
+    ("lp1000_ms", "lp(1000) ms", "{:.0f}"), ("lp1000_cpu_ms", "cpu ms", "{:.0f}"),
+    ("ns_eval_wall", "ns/eval wall", "{:.3f}"),
+    ("ns_eval_cpu_per_thread", "ns/eval cpu/thr", "{:.3f}"),
+    ("floor_ms", "floor ms", "{:.0f}"), ("ratio_to_floor", "lp/floor", "{:.2f}"),
+    ("pmc_1000x20_s", "PMC 1000x20 s", "{:.1f}"),
+]
+
+
+def _fmt_row(row: dict) -> str:
+    cells = (fmt.format(row[k]) if k in row else "-" for k, _, fmt in COLUMNS)
+    return "| " + " | ".join(cells) + " |"
+
+
+def table(rows: list[dict]) -> str:
+    head = "| " + " | ".join(h for _, h, _ in COLUMNS) + " |"
+    sep = "|" + "|".join("---" for _ in COLUMNS) + "|"
+    return "\n".join([head, sep, *(_fmt_row(r) for r in rows)])
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p.add_argument("--brdf", nargs="+", default=["ward"])
+    p.add_argument("--labels", nargs="+", type=int, default=[10, 20, 30, 40])
+    p.add_argument("--dtype", nargs="+", default=["float64"], choices=["float64", "float32"])
+    p.add_argument("--shape", nargs=2, type=int, default=[100, 100])
+    p.add_argument("--repeat", type=int, default=3)
+    p.add_argument("--pmc", action="store_true", help="also time PMC 1000 x 20")
+    p.add_argument("--no-write", action="store_true", help="do not append to RESULTS.md")
+    p.add_argument("--results", type=Path, default=Path(__file__).with_name("RESULTS.md"))
+    args = p.parse_args(argv)
+
+    info = machine()
+    print(" ".join(f"{k}={v}" for k, v in info.items()))
+    floor = comparison_kernel()
+    head = "| " + " | ".join(h for _, h, _ in COLUMNS) + " |"
+    print(head)
+    rows = []
+    for brdf in args.brdf:
+        for dtype in args.dtype:
+            rows += bench(brdf, tuple(args.shape), args.labels, args.repeat, args.pmc, floor,
+                          dtype)
+    info["load_avg_end"] = " ".join(f"{x:.2f}" for x in os.getloadavg())
+    text = table(rows)
+    if not args.no_write:
+        section = [
+            f"\n## bench_targets: pls {args.shape[0]}x{args.shape[1]} ({info['date']})\n",
+            "Command: `python benchmarks/bench_targets.py "
+            + " ".join(sys.argv[1:] if argv is None else argv) + "`\n",
+            "Machine: " + ", ".join(f"{k} {v}" for k, v in info.items() if k != "date") + "\n",
+            "`ns/eval` is per BRDF evaluation (variable + fixed triangles), the label "
+            "log-sum-exp included in the time; `cpu/thr` divides the CPU time by the "
+            "thread count (the wall time on idle cores). `floor` is the comparison kernel "
+            "scaled to the same number of evaluations.\n",
+            text, "",
+        ]
+        with args.results.open("a") as f:
+            f.write("\n".join(section) + "\n")
+        print(f"appended to {args.results}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,336 @@
+"""Multiple-seed local optimisers: Levenberg–Marquardt (thesis 7.3.1–7.3.2) and NLopt.
+
+Both start one local optimisation from each of ``n_seeds`` evenly spaced points
+of the parameter box (512 by default, 7.3.2 step 1: "seeds ... distributed as
+the samples in Fig. 7.15", i.e. the same grid as PMC's initial set,
+:func:`mrfpe.samplers._common.grid`; 8³ cell centres in 3-D). The optima are the
+sample set, each weighted by its target value (``log_weight = log_target``), so
+the posterior's MAP is the best optimum and the set can be compared with the
+samplers' sets. The best-so-far trace runs over the seed index (step = seed),
+which is what Figs. 7.3–7.6 plot against the number of seeds.
+
+``seed_grid="even"`` (default) is the thesis's deterministic grid, so the
+``seed`` argument changes nothing there except NLopt's stochastic algorithms;
+``"shifted"`` moves the whole grid by one uniform random offset of at most half
+a cell per axis (a randomised lattice — still evenly spaced) drawn from
+``seed``, for studies of the spread due to seed placement.
+
+These are optimisers, not samplers: the optima do not represent the
+posterior's spread, so the conformance moment check is declared not to apply
+(``conformance``).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from mrfpe.samplers._common import Run, check_seed, check_target, grid
+from mrfpe.samplers.base import Callback, Sampler, check_choice, check_positive_int, check_range
+
+__all__ = ["LMMultiSeed", "NLoptMultiSeed", "seed_points"]
+
+#: Stand-in for a non-finite residual (1/p with p = 0 in 7.10): large, but its
+#: square summed over 10⁶ nodes stays far from overflow.
+NONFINITE_RESIDUAL = 1e50
+_FD_STEP = float(np.sqrt(np.finfo(np.float64).eps))
+_GRIDS = ("even", "shifted")
+_CONFORMANCE = {
+    # The optima sit at modes: their weighted spread is not the posterior's.
+    "gaussian_moments": False,
+    # The randomly shifted grid makes the seed matter, for the reproducibility check.
+    "quick_config": {"n_seeds": 27, "seed_grid": "shifted"},
+}
+
+
+def seed_points(bounds: np.ndarray, n: int, kind: str = "even",
+                rng: np.random.Generator | None = None) -> np.ndarray:
+    """The ``n`` starting points (n, d): the evenly spaced grid of 7.3.2, optionally shifted.
+
+    ``kind="shifted"`` adds one offset per axis, uniform within ± half the grid
+    spacing on that axis, to every point (so the points stay inside the box).
+    """
+    pts = grid(bounds, n)
+    if kind == "even":
+        return pts
+    if rng is None:
+        raise ValueError("a shifted seed grid needs rng")
+    width = bounds[:, 1] - bounds[:, 0]
+    half = np.empty(bounds.shape[0])
+    for j in range(bounds.shape[0]):
+        gaps = np.diff(np.unique(pts[:, j]))
+        half[j] = 0.5 * (gaps.min() if gaps.size else width[j])
+    return np.clip(pts + rng.uniform(-half, half), bounds[:, 0], bounds[:, 1])
+
+
+class _MultiSeed(Sampler):
+    """Shared driver: one local optimisation per seed point, optima as the sample set."""
+
+    conformance = _CONFORMANCE
+
+    def _check_common(self, n_seeds: int, seed_grid: str) -> None:
+        self.n_seeds = check_positive_int("n_seeds", n_seeds)
+        self.seed_grid = check_choice("seed_grid", seed_grid, _GRIDS)
+
+    def _optimise(self, target: Any, x0: np.ndarray, run: Run, bounds: np.ndarray,
+                  rng: np.random.Generator) -> tuple[np.ndarray, dict[str, float]]:
+        raise NotImplementedError  # pragma: no cover
+
+    def _prepare(self, target: Any, bounds: np.ndarray) -> None:
+        """Check target requirements before any evaluation (override)."""
+
+    def run(self, target: Any, *, seed: int | None, progress: bool = False,
+            callback: Callback | None = None):
+        """Optimise from every seed point and return the posterior Dataset."""
+        bounds = check_target(target)
+        check_seed(seed)
+        self._prepare(target, bounds)
+        rng = np.random.default_rng(seed)
+        starts = seed_points(bounds, self.n_seeds, self.seed_grid, rng)
+        run = Run(target, starts.shape[0], progress=progress, callback=callback, desc=self.name)
+        opt = np.empty_like(starts)
+        lt = np.empty(starts.shape[0])
+        info: dict[str, list[float]] = {}
+        for i, x0 in enumerate(starts):
+            x, stats = self._optimise(target, x0, run, bounds, rng)
+            opt[i] = np.clip(x, bounds[:, 0], bounds[:, 1])
+            lt[i] = run.evaluate(target, opt[i:i + 1])[0]
+            run.offer(opt[i:i + 1], lt[i:i + 1])
+            for k, v in stats.items():
+                info.setdefault(k, []).append(v)
+            run.step(i, np.nan, **{k: float(v) for k, v in stats.items()})
+        extra = {"seed_theta": (("sample", "param"), starts)}
+        extra.update({k: (("sample",), np.asarray(v, dtype=np.float64)) for k, v in info.items()})
+        return run.finish(opt, lt, lt, sampler=self.name, config=self.get_config(), seed=seed,
+                          extra_vars=extra)
+
+
+class LMMultiSeed(_MultiSeed):
+    """Multiple-seed Levenberg–Marquardt on the target's error vector (7.10–7.12, 7.3.2).
+
+    Each seed runs ``scipy.optimize.least_squares(method="lm")`` (MINPACK) on
+    ``target.residuals(θ)`` — the per-node error vector ε(i) = 1/p(x_i | x_N_i, θ)
+    of 7.10 for the pseudolikelihood targets — returning [θ_min, err] as 7.12.
+    LM is unbounded, so it works on unconstrained z with
+
+    * ``transform="sine"`` (default): θ = lo + (hi − lo)(1 + sin z)/2 — smooth,
+      every z maps into the box, the seed maps back by arcsin (MINUIT's
+      bounded-parameter transform);
+    * ``transform="clip"``: θ = clip(z, lo, hi) — the residuals are flat outside
+      the box, so LM can stall on a face.
+
+    Non-finite residuals (a node with p = 0) are replaced by
+    ``NONFINITE_RESIDUAL`` so MINPACK keeps finite arithmetic. Every residual
+    evaluation, including MINPACK's finite-difference Jacobian columns, counts
+    as one target evaluation (``target.cost``), plus one ``log_prob`` per optimum
+    (``n_evals`` per seed counts the residual evaluations).
+    The optimum's 7.12 ``err`` is kept per seed as ``lm_cost`` (½‖ε‖²): 7.3.2
+    step 13 ranks seeds by it, while ``map_theta`` ranks them by the target.
+
+    Parameters
+    ----------
+    n_seeds : int
+        Number of seed points (512, 7.3.2).
+    seed_grid : ``"even"`` | ``"shifted"``
+        The thesis's grid, or the grid shifted by a random offset (module docs).
+    transform : ``"sine"`` | ``"clip"``
+        How the bounded box is mapped for the unbounded LM.
+    jacobian : ``"batched"`` | ``"minpack"``
+        ``"batched"`` (default): MINPACK's forward-difference Jacobian (step
+        √eps·|z_j|) computed in one batched ``residuals`` call of d rows;
+        ``"minpack"``: MINPACK's own column-by-column differences (lmdif), d
+        single calls — the same derivative estimate, about twice the time on a
+        pseudolikelihood target, whose batched evaluation is cheaper per row.
+    ftol, xtol, gtol : float
+        MINPACK's tolerances (scipy's defaults, 1e-8).
+    max_nfev : int
+        Residual evaluations per seed (0: scipy's default, 100·d·(d + 1)).
+    """
+
+    name = "lm_multiseed"
+
+    def __init__(self, n_seeds: int = 512, seed_grid: str = "even", transform: str = "sine",
+                 jacobian: str = "batched", ftol: float = 1e-8, xtol: float = 1e-8,
+                 gtol: float = 1e-8, max_nfev: int = 0):
+        self._check_common(n_seeds, seed_grid)
+        self.transform = check_choice("transform", transform, ("sine", "clip"))
+        self.jacobian = check_choice("jacobian", jacobian, ("batched", "minpack"))
+        self.ftol = check_range("ftol", ftol, 0.0, 1.0, high_open=True)
+        self.xtol = check_range("xtol", xtol, 0.0, 1.0, high_open=True)
+        self.gtol = check_range("gtol", gtol, 0.0, 1.0, high_open=True)
+        if self.ftol == self.xtol == self.gtol == 0.0:
+            raise ValueError("at least one of ftol, xtol, gtol must be > 0")
+        self.max_nfev = check_positive_int("max_nfev", max_nfev, minimum=0)
+
+    def _prepare(self, target: Any, bounds: np.ndarray) -> None:
+        if not callable(getattr(target, "residuals", None)):
+            raise ValueError(f"lm_multiseed needs a target with residuals(theta) (the error "
+                             f"vector of 7.10); {type(target).__name__} has none — use a "
+                             f"pseudolikelihood target or nlopt_multiseed")
+
+    def _to_theta(self, z: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        if self.transform == "sine":
+            return lo + (hi - lo) * 0.5 * (1.0 + np.sin(z))
+        return np.clip(z, lo, hi)
+
+    def _to_z(self, x: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        if self.transform == "sine":
+            return np.arcsin(np.clip(2.0 * (x - lo) / (hi - lo) - 1.0, -1.0, 1.0))
+        return x.copy()
+
+    def _optimise(self, target: Any, x0: np.ndarray, run: Run, bounds: np.ndarray,
+                  rng: np.random.Generator) -> tuple[np.ndarray, dict[str, float]]:
+        from scipy.optimize import least_squares
+
+        lo, hi = bounds[:, 0], bounds[:, 1]
+        cost = float(getattr(target, "cost", 1.0))
+        start = run.n_evals
+        last: dict[str, np.ndarray] = {}
+
+        def residuals(zs: np.ndarray) -> np.ndarray:  # (k, d) -> (k, m), one batched call
+            run.n_evals += cost * zs.shape[0]
+            r = np.asarray(target.residuals(self._to_theta(zs, lo, hi)), dtype=np.float64)
+            r = r.reshape(zs.shape[0], -1)
+            return np.where(np.isfinite(r), r, NONFINITE_RESIDUAL)
+
+        def fun(z: np.ndarray) -> np.ndarray:
+            last["z"], last["r"] = z.copy(), residuals(z[None, :])[0]
+            return last["r"]
+
+        def jac(z: np.ndarray) -> np.ndarray:
+            # MINPACK's forward differences (lmdif's step sqrt(eps)·|z_j|), all d columns
+            # in one batched call; MINPACK evaluated r(z) just before asking for J(z).
+            r0 = last["r"] if "z" in last and np.array_equal(last["z"], z) else fun(z)
+            h = _FD_STEP * np.where(z == 0.0, 1.0, np.abs(z))
+            return ((residuals(z[None, :] + np.diag(h)) - r0) / h[:, None]).T
+
+        z0 = self._to_z(x0, lo, hi)
+        m = fun(z0).size
+        if m < x0.size:
+            raise ValueError(f"target.residuals returned {m} values for {x0.size} parameters; "
+                             "Levenberg–Marquardt needs at least as many residuals as parameters")
+        res = least_squares(fun, z0, jac=jac if self.jacobian == "batched" else "2-point",
+                            method="lm", ftol=self.ftol or None, xtol=self.xtol or None,
+                            gtol=self.gtol or None, max_nfev=self.max_nfev or None)
+        return self._to_theta(res.x, lo, hi), {"lm_cost": float(res.cost),
+                                               "n_evals": (run.n_evals - start) / cost,
+                                               "status": float(res.status)}
+
+
+class NLoptMultiSeed(_MultiSeed):
+    """Multiple-seed NLopt maximisation of ``log_prob`` (any algorithm; default LN_BOBYQA).
+
+    The same seed points as ``lm_multiseed`` (7.3.2), with the box passed to
+    NLopt as bounds. NLopt needs finite objective values, so ``-inf`` (outside
+    the support) is replaced by ``neg_inf_value`` (default −1e30: far below any
+    log density, and squares stay finite inside BOBYQA's quadratic models).
+    Gradient-based algorithms (``LD_*``, ``GD_*``) get central differences with
+    step ``fd_step`` × range (one batched ``log_prob`` call of 2·d rows,
+    one-sided at the faces); algorithms that need a subsidiary local optimiser
+    (``*MLSL*``, ``AUGLAG*``) get LN_BOBYQA with the same tolerances.
+    Stochastic algorithms are seeded per seed point from ``seed``
+    (``nlopt.srand``). Each optimum is the best point the objective saw.
+
+    Parameters
+    ----------
+    algorithm : str
+        NLopt algorithm name, e.g. ``"LN_BOBYQA"``, ``"LN_NELDERMEAD"``,
+        ``"LD_LBFGS"``, ``"GN_DIRECT_L"``.
+    n_seeds : int
+        Number of seed points (512, 7.3.2).
+    seed_grid : ``"even"`` | ``"shifted"``
+        The thesis's grid, or the grid shifted by a random offset (module docs).
+    xtol_rel, ftol_abs : float
+        NLopt stopping tolerances (0 disables one).
+    max_evals : int
+        Objective evaluations per seed.
+    initial_step : float
+        Initial step of derivative-free algorithms, as a fraction of each range.
+    fd_step : float
+        Finite-difference step for gradient-based algorithms (fraction of range).
+    neg_inf_value : float
+        Finite stand-in for ``-inf``.
+    """
+
+    name = "nlopt_multiseed"
+
+    def __init__(self, algorithm: str = "LN_BOBYQA", n_seeds: int = 512,
+                 seed_grid: str = "even", xtol_rel: float = 1e-6, ftol_abs: float = 1e-9,
+                 max_evals: int = 500, initial_step: float = 0.05, fd_step: float = 1e-6,
+                 neg_inf_value: float = -1e30):
+        if not isinstance(algorithm, str) or not algorithm.isidentifier():
+            raise ValueError(f"algorithm must be an NLopt algorithm name such as 'LN_BOBYQA'; "
+                             f"got {algorithm!r}")
+        import nlopt
+
+        family = algorithm.split("_")[0]
+        if not isinstance(getattr(nlopt, algorithm, None), int) or not (
+                (family in ("LN", "LD", "GN", "GD", "G") and "_" in algorithm)
+                or algorithm.startswith("AUGLAG")):
+            raise ValueError(f"algorithm must be an NLopt algorithm name such as 'LN_BOBYQA'; "
+                             f"got {algorithm!r}")
+        self.algorithm = algorithm
+        self._check_common(n_seeds, seed_grid)
+        self.xtol_rel = check_range("xtol_rel", xtol_rel, 0.0, 1.0, high_open=True)
+        self.ftol_abs = check_range("ftol_abs", ftol_abs, 0.0, np.inf, high_open=True)
+        self.max_evals = check_positive_int("max_evals", max_evals)
+        self.initial_step = check_range("initial_step", initial_step, 0.0, 1.0, low_open=True)
+        self.fd_step = check_range("fd_step", fd_step, 0.0, 0.1, low_open=True)
+        self.neg_inf_value = check_range("neg_inf_value", neg_inf_value, -1e300, 0.0,
+                                         high_open=True)
+
+    def _gradient(self, target: Any, x: np.ndarray, f0: float, run: Run,
+                  bounds: np.ndarray) -> np.ndarray:
+        """Central differences of log_prob at x in one batched call (one-sided at faces)."""
+        d = x.size
+        h = self.fd_step * (bounds[:, 1] - bounds[:, 0])
+        up = np.minimum(x + h, bounds[:, 1])
+        dn = np.maximum(x - h, bounds[:, 0])
+        pts = np.repeat(x[None, :], 2 * d, axis=0)
+        pts[np.arange(d), np.arange(d)] = up
+        pts[d + np.arange(d), np.arange(d)] = dn
+        f = run.evaluate(target, pts)
+        f = np.where(np.isfinite(f), f, self.neg_inf_value)
+        return (f[:d] - f[d:]) / (up - dn)
+
+    def _optimise(self, target: Any, x0: np.ndarray, run: Run, bounds: np.ndarray,
+                  rng: np.random.Generator) -> tuple[np.ndarray, dict[str, float]]:
+        import nlopt
+
+        d = x0.size
+        alg = getattr(nlopt, self.algorithm)
+        best = {"x": x0.copy(), "f": -np.inf, "n": 0}
+
+        def objective(x: np.ndarray, grad: np.ndarray) -> float:
+            f = float(run.evaluate(target, x[None, :])[0])
+            best["n"] += 1
+            if f > best["f"]:
+                best["x"], best["f"] = x.copy(), f
+            f = f if np.isfinite(f) else self.neg_inf_value
+            if grad.size:
+                grad[:] = self._gradient(target, x, f, run, bounds)
+            return f
+
+        def configure(o: Any) -> None:
+            o.set_lower_bounds(bounds[:, 0])
+            o.set_upper_bounds(bounds[:, 1])
+            o.set_xtol_rel(self.xtol_rel)
+            o.set_ftol_abs(self.ftol_abs)
+            o.set_maxeval(self.max_evals)
+            o.set_initial_step(self.initial_step * (bounds[:, 1] - bounds[:, 0]))
+
+        nlopt.srand(int(rng.integers(2**31 - 1)))
+        opt = nlopt.opt(alg, d)
+        configure(opt)
+        if "MLSL" in self.algorithm or self.algorithm.startswith("AUGLAG"):
+            local = nlopt.opt(nlopt.LN_BOBYQA, d)
+            configure(local)
+            opt.set_local_optimizer(local)
+        opt.set_max_objective(objective)
+        try:
+            opt.optimize(x0.copy())
+            status = float(opt.last_optimize_result())
+        except (nlopt.RoundoffLimited, RuntimeError):  # keep the best point seen
+            status = -4.0
+        return best["x"], {"n_fev": float(best["n"]), "status": status}

@@ -1,0 +1,190 @@
+"""Running time of every sampler at 10-40 labels, beside the thesis's Table 8.12.
+
+Table 8.12 gives approximate times on an AMD Athlon 4600 for a 100×100 image:
+multiple-seed LM (512 seeds, 10 iterations) 1.3-5 h, R-type MCMC (20000
+steps) 9-36 min, PMC (1000 samples, 20 iterations) 4-16 min, growing linearly
+with the number of labels (8.3). Each trial here builds one synthetic Ward
+scene (smooth surface, 7.2), its PL_s target (7.7) and the target's global
+maximiser, then runs every configured sampler on it in turn (``runs``: a label
+for each run, its sampler and that sampler's settings; the defaults are the
+thesis's where it gives them). For each run it records the wall time, the
+target evaluations (full-lattice equivalents) and the evaluations after which
+the best-so-far MAP first comes within ``level`` (0.1) of the truth and of the
+maximiser.
+
+Timings are only meaningful when nothing else competes for the cores: run
+this study in-process (no ``--scheduler``) on an otherwise idle machine.
+
+Full run: about 12 h on two cores. That is 12 scenes (4 label counts × 3) × all
+ten runs, measured at 50 min per 20-label scene (shared 2-core machine,
+pseudolikelihood kernel of Nov 2026; ~8 ms per single-point evaluation), most
+of it in the single-point samplers: ``nlopt_multiseed`` (512 seeds × up to 500
+evaluations), the two 20000-step chains and 512-seed LM. ``--trials 1`` takes
+about 4 h.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+
+from mrfpe.studies._report import markdown_table, new_figure, save_figure, write_report
+from mrfpe.studies._synthetic import (
+    child_seeds,
+    distance,
+    first_reach,
+    make_problem,
+    maximiser,
+    sample_traced,
+)
+from mrfpe.studies._thesis import RUNTIME_MINUTES
+from mrfpe.study import Study, by_cell
+
+#: Which run is compared with which column of Table 8.12.
+THESIS_COLUMN = {"pmc_thesis2": "pmc", "pmc": "pmc", "dw_r": "dw_r",
+                 "lm_multiseed": "lm_multiseed"}
+
+
+def trial(config: dict, repeat: int, seed: int) -> xr.Dataset:
+    """One scene; every run in ``config["runs"]``; times and evaluations to reach ``level``."""
+    s_problem, s_runs = child_seeds(seed, 2)
+    t0 = time.perf_counter()
+    prob = make_problem(config["brdf"], s_problem, surface=config["surface"],
+                        shape=config["shape"], n_labels=config["n_labels"],
+                        noise=config["noise"], target=config["target"],
+                        target_options=config["target_options"],
+                        truth_range=config["truth_range"], maximiser_grid=None)
+    build_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    mx, _ = maximiser(prob.target, config["maximiser_grid"], s_problem, prob.truth)
+    max_s = time.perf_counter() - t0
+    labels = list(config["runs"])
+    out = {k: np.full(len(labels), np.nan) for k in
+           ("wall_time_s", "n_target_evals", "evals_to_truth", "evals_to_maximiser",
+            "final_to_truth", "final_to_maximiser")}
+    for k, (label, run_seed) in enumerate(zip(labels, child_seeds(s_runs, len(labels)))):
+        opts = dict(config["runs"][label])
+        name = opts.pop("sampler")
+        post, evals = sample_traced(name, prob.target, run_seed, **opts)
+        m = post["map_theta"].values
+        d_truth, d_max = distance(m, prob.truth), distance(m, mx)
+        out["wall_time_s"][k] = post.attrs["wall_time_s"]
+        out["n_target_evals"][k] = post.attrs["n_target_evals"]
+        out["evals_to_truth"][k] = first_reach(d_truth, evals, config["level"])
+        out["evals_to_maximiser"][k] = first_reach(d_max, evals, config["level"])
+        out["final_to_truth"][k], out["final_to_maximiser"][k] = d_truth[-1], d_max[-1]
+    ds = xr.Dataset({k: (("run",), v) for k, v in out.items()},
+                    coords={"run": labels, "param": list(prob.target.param_names)})
+    ds["build_time_s"] = ((), build_s)
+    ds["maximiser_time_s"] = ((), max_s)
+    ds["maximiser"] = (("param",), np.asarray(mx, dtype=float))
+    ds["truth"] = (("param",), prob.truth)
+    return ds
+
+
+def _minutes(seconds: float) -> str:
+    return f"{seconds:.3g} s" if seconds < 120 else f"{seconds / 60:.3g} min"
+
+
+def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
+    """Table 8.12 layout (ours beside the thesis), evaluations to reach the level, a figure."""
+    cells = by_cell(results, "n_labels")
+    labels_list = [lab for (lab,) in cells]
+    runs = list(config["runs"])
+    means = {lab: xr.concat(g, dim="trial").mean("trial") for (lab,), g in cells.items()}
+    # The thesis's times are for 100×100 images: compare only like with like.
+    thesis_size = list(config["shape"]) == [100, 100]
+    rows = []
+    for run in runs:
+        for lab in labels_list:
+            m = means[lab].sel(run=run)
+            ref = RUNTIME_MINUTES.get(THESIS_COLUMN.get(run, ""), {}).get(lab)
+            ref = ref if thesis_size else None
+            wall = float(m["wall_time_s"])
+            reached = sum(bool(np.isfinite(g["evals_to_truth"].sel(run=run)))
+                          for g in cells[(lab,)])
+            rows.append([run, lab, _minutes(wall), "–" if ref is None else f"{ref:g} min",
+                         "–" if ref is None else f"{ref * 60 / wall:.0f}×",
+                         float(m["n_target_evals"]), f"{reached}/{len(cells[(lab,)])}",
+                         float(m["evals_to_truth"]), float(m["evals_to_maximiser"]),
+                         float(m["final_to_truth"]), float(m["final_to_maximiser"])])
+    level = config["level"]
+    table = markdown_table(["run", "labels", "ours", "thesis (Athlon 4600)", "speed-up",
+                            "target evals", "reached", f"evals to {level} of truth",
+                            f"evals to {level} of max", "final→truth", "final→max"], rows)
+    setup = markdown_table(
+        ["labels", "scenes", "scene + target build", "maximiser"],
+        [[lab, len(cells[(lab,)]), _minutes(float(means[lab]["build_time_s"])),
+          _minutes(float(means[lab]["maximiser_time_s"]))] for lab in labels_list])
+    fig, axes = new_figure(1, 1, size=(6, 4))
+    ax = axes[0, 0]
+    for k, run in enumerate(runs):
+        ax.plot(labels_list, [float(means[lab]["wall_time_s"].sel(run=run))
+                              for lab in labels_list], "o-", color=f"C{k % 10}", label=run)
+        ref = RUNTIME_MINUTES.get(THESIS_COLUMN.get(run, ""))
+        if ref and run != "pmc" and thesis_size:
+            ax.plot(labels_list, [ref.get(lab, np.nan) * 60 for lab in labels_list], "x:",
+                    color=f"C{k % 10}", label=f"{run} (thesis)")
+    ax.set(xlabel="labels per node", ylabel="wall time (s)", yscale="log",
+           title="Running time per run (Table 8.12)")
+    ax.legend(fontsize=6, ncol=2)
+    png = save_figure(fig, out_dir / "runtime.png")
+    write_report(out_dir, "Running times (thesis Table 8.12)", [
+        f"Config: `{json.dumps(config)}`.",
+        "Mean over scenes. *target evals*: full-lattice-equivalent evaluations; *evals to "
+        f"{level}*: evaluations after which the best-so-far MAP first lies within {level} "
+        "(unit cube) of the truth / of the target's global maximiser (mean over the scenes "
+        "where it does; *reached*: in how many scenes it does). The thesis's times are for "
+        "its PMC (II), R-type MCMC and 512-seed LM on 100×100 images; `pmc` (mixture) is "
+        "compared with the same column.",
+        table, "Set-up per scene:\n\n" + setup, f"![runtime]({png})"])
+    return table
+
+
+STUDY = Study(
+    name="runtime",
+    doc=__doc__,
+    config={
+        "n_trials": 3, "seed": 812, "n_labels": [10, 20, 30, 40],
+        "brdf": "ward", "surface": "smooth", "shape": [100, 100], "noise": 0.0,
+        "target": "pls", "target_options": {}, "truth_range": [0.1, 0.9],
+        "maximiser_grid": 20, "level": 0.1,
+        "runs": {
+            "pmc": {"sampler": "pmc", "n_samples": 1000, "n_iterations": 20},
+            "pmc_thesis2": {"sampler": "pmc", "n_samples": 1000, "n_iterations": 20,
+                            "variant": "thesis2"},
+            "dw_r": {"sampler": "dw_r", "n_steps": 20000},
+            "dw_q": {"sampler": "dw_q", "n_steps": 20000},
+            "lm_multiseed": {"sampler": "lm_multiseed", "n_seeds": 512, "max_nfev": 40},
+            "nlopt_multiseed": {"sampler": "nlopt_multiseed", "n_seeds": 512},
+            "mh": {"sampler": "mh"},
+            "emcee": {"sampler": "emcee"},
+            "sir": {"sampler": "sir"},
+            "ppf": {"sampler": "ppf"},
+        },
+    },
+    quick={
+        "n_trials": 1, "n_labels": [10, 20], "shape": [12, 12], "maximiser_grid": 8,
+        "runs": {
+            "pmc": {"sampler": "pmc", "n_samples": 64, "n_iterations": 5},
+            "pmc_thesis2": {"sampler": "pmc", "n_samples": 64, "n_iterations": 5,
+                            "variant": "thesis2"},
+            "dw_r": {"sampler": "dw_r", "n_steps": 300},
+            "dw_q": {"sampler": "dw_q", "n_steps": 300},
+            "lm_multiseed": {"sampler": "lm_multiseed", "n_seeds": 8, "max_nfev": 40},
+            "nlopt_multiseed": {"sampler": "nlopt_multiseed", "n_seeds": 8, "max_evals": 40},
+            "mh": {"sampler": "mh", "n_steps": 100, "n_chains": 4, "burn_in": 20},
+            "emcee": {"sampler": "emcee", "n_walkers": 8, "n_steps": 40, "burn_in": 10},
+            "sir": {"sampler": "sir", "n_samples": 64, "n_iterations": 5},
+            "ppf": {"sampler": "ppf", "n_samples": 64, "n_partitions": 5},
+        },
+    },
+    trial=trial,
+    summarise=summarise,
+    grid=("n_labels",),
+    shared_seed=("n_labels",),
+)

@@ -1,0 +1,260 @@
+"""Theta-independent precompute of the BRDF data energy ``U^A`` (thesis 4.12, 4.20, 4.27).
+
+For a node ``i`` taking label ``s`` (its 3-D point moved along its ray, every
+other node at its observed label), the data energy is a sum over the node's
+*slots* -- the image observations its label influences --
+
+    ``U^A_i(s) = sum_slots |y_slot - w_slot * (sum of the slot's triangle radiances)| / sigma_b``.
+
+Two data terms share this form:
+
+``"pixel"`` (default; agrees exactly with :func:`mrfpe.synthetic.render`)
+    One slot per pixel touching the node (up to 4). Each pixel is split into
+    the lattice's two triangles (:attr:`mrfpe.lattice.Lattice.triangles`) and
+    rendered as their mean (``w = 1/2``). A triangle containing node ``i`` is
+    *variable* (its radiance depends on ``s``; up to 6 per node); the other
+    triangle of a pixel whose diagonal does not pass through ``i`` is *fixed*
+    (all corners observed) and its radiance is computed once per particle and
+    node, not per label. Noise-free data then have zero data energy at the
+    true labels and parameters.
+
+``"triplet"`` (the thesis's literal form, 4.12/4.20 with 4.27)
+    One slot per triplet clique centred on the node (four for an interior
+    node): the clique triangle ``(i, j, k)``'s radiance is compared with the
+    whole pixel's intensity (``w = 1``, no fixed triangle). Cheaper (4 BRDF
+    evaluations per label instead of 6) but inconsistent with a renderer that
+    averages over the pixel, so noise-free data do not give zero energy.
+
+The tables are CSR-like arrays sorted by node (see :mod:`mrfpe.targets.kernels`)
+and :meth:`DataTables.subset` extracts a sub-lattice's rows without touching
+any other node's entries. Geometry (3-D points, normals, light and view
+directions, irradiance) is computed by :func:`mrfpe.shading.triangle_geometry`
+with vertices in the lattice's order, exactly as the renderer does.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from mrfpe.shading import shading_features, triangle_geometry
+from mrfpe.targets import reflectance
+
+__all__ = ["DATA_TERMS", "DataTables", "build_tables", "chunk_bounds", "energies_reference"]
+
+DATA_TERMS = ("pixel", "triplet")
+
+#: Triangles whose geometry is computed per numpy batch at construction
+#: (bounds the construction's peak memory).
+_GEOM_BATCH = 131072
+#: Variable-triangle entries per parallel chunk (features of a chunk stay in L2).
+_CHUNK_ENTRIES = 4096
+
+
+@dataclass(frozen=True)
+class DataTables:
+    """Data-energy tables of a set of nodes (all arrays indexed by *local* node).
+
+    Attributes
+    ----------
+    nodes : (n,) int64
+        Global node ids (lattice numbering), ascending.
+    slot_ptr : (n + 1,) int64
+    slot_y, slot_w : (n_slots,) float64
+    slot_nvar : (n_slots,) int64
+    fix_feat : (5, n_slots) float64
+        Separable features of each slot's fixed triangle (zero if none).
+    var_ptr : (n + 1,) int64
+    var_feat : (5, n_var_entries) float64
+        Features of node ``i``'s ``t``-th variable triangle at label ``s`` in
+        column ``var_ptr[i] + t * B + s`` (structure of arrays).
+    n_labels : int
+    data_term : str
+    """
+
+    nodes: np.ndarray
+    slot_ptr: np.ndarray
+    slot_y: np.ndarray
+    slot_w: np.ndarray
+    slot_nvar: np.ndarray
+    fix_feat: np.ndarray
+    var_ptr: np.ndarray
+    var_feat: np.ndarray
+    n_labels: int
+    data_term: str
+
+    @property
+    def n_nodes(self) -> int:
+        return int(self.nodes.shape[0])
+
+    @property
+    def nbytes(self) -> int:
+        return int(sum(getattr(self, f).nbytes for f in (
+            "nodes", "slot_ptr", "slot_y", "slot_w", "slot_nvar", "fix_feat", "var_ptr",
+            "var_feat")))
+
+    @property
+    def brdf_evals_per_particle(self) -> int:
+        """Triangle radiances one particle costs: variable entries + fixed triangles."""
+        return int(self.var_feat.shape[1] + np.count_nonzero(self.slot_nvar == 1)
+                   * (self.data_term == "pixel"))
+
+    def astype(self, dtype: Any) -> DataTables:
+        """The tables with the floating-point arrays (intensities, weights, features) cast."""
+        return replace(self, slot_y=self.slot_y.astype(dtype), slot_w=self.slot_w.astype(dtype),
+                       fix_feat=self.fix_feat.astype(dtype), var_feat=self.var_feat.astype(dtype))
+
+    def subset(self, local: np.ndarray) -> DataTables:
+        """Tables restricted to the nodes at local indices ``local`` (ascending)."""
+        local = np.asarray(local, dtype=np.int64)
+        sptr, sidx = _gather(self.slot_ptr, local)
+        vptr, vidx = _gather(self.var_ptr, local)
+        return DataTables(
+            nodes=self.nodes[local], slot_ptr=sptr, slot_y=self.slot_y[sidx],
+            slot_w=self.slot_w[sidx], slot_nvar=self.slot_nvar[sidx],
+            fix_feat=np.ascontiguousarray(self.fix_feat[:, sidx]), var_ptr=vptr,
+            var_feat=np.ascontiguousarray(self.var_feat[:, vidx]),
+            n_labels=self.n_labels, data_term=self.data_term)
+
+
+def _gather(ptr: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """New CSR pointer and flat row indices of the rows of ``idx`` (no Python loop)."""
+    counts = ptr[idx + 1] - ptr[idx]
+    new = np.zeros(idx.shape[0] + 1, dtype=np.int64)
+    np.cumsum(counts, out=new[1:])
+    flat = np.repeat(ptr[idx] - new[:-1], counts) + np.arange(new[-1], dtype=np.int64)
+    return new, flat
+
+
+def chunk_bounds(var_ptr: np.ndarray, entries: int = _CHUNK_ENTRIES) -> np.ndarray:
+    """Node ranges of the kernel's parallel chunks: about ``entries`` variable entries each.
+
+    Depends only on the tables, never on the machine, so sums are reproducible.
+    """
+    n = var_ptr.shape[0] - 1
+    if n == 0:
+        return np.zeros(1, dtype=np.int64)
+    total = int(var_ptr[-1])
+    n_chunks = max(1, -(-total // entries))
+    cuts = np.searchsorted(var_ptr, np.arange(1, n_chunks) * (total / n_chunks))
+    return np.unique(np.concatenate([[0], cuts, [n]])).astype(np.int64)
+
+
+def _separable_geometry(model, tri_pts: np.ndarray, scene) -> np.ndarray:
+    """Separable features (M, 5) of triangles with vertices ``tri_pts`` (M, 3, 3)."""
+    out = np.empty((tri_pts.shape[0], 5))
+    for a in range(0, tri_pts.shape[0], _GEOM_BATCH):
+        p = tri_pts[a:a + _GEOM_BATCH]
+        geom = triangle_geometry(p[:, 0], p[:, 1], p[:, 2], scene.camera, scene.light,
+                                 scene.tangent_ref)
+        feats, weight = shading_features(model, geom)
+        out[a:a + _GEOM_BATCH] = reflectance.features(model, feats, weight)
+    return out
+
+
+def build_tables(scene, data_term: str = "pixel") -> DataTables:
+    """Data-energy tables of every node of ``scene`` for ``scene.brdf``.
+
+    Parameters
+    ----------
+    scene : mrfpe.scene.Scene
+    data_term : "pixel" | "triplet"
+        See the module docstring.
+    """
+    if data_term not in DATA_TERMS:
+        raise ValueError(f"data_term must be one of {DATA_TERMS}; got {data_term!r}")
+    model = scene.model
+    lat = scene.lattice
+    n_nodes = lat.n_nodes
+    B = scene.n_labels
+    P = np.asarray(scene.label_points()).reshape(n_nodes, B, 3)
+    Q = np.asarray(scene.observed_points()).reshape(n_nodes, 3)
+    img = scene.image.reshape(-1)
+
+    if data_term == "pixel":
+        indptr, pix = lat.node_pixels
+        slot_node = np.repeat(np.arange(n_nodes, dtype=np.int64), np.diff(indptr))
+        slot_pix = np.asarray(pix, dtype=np.int64)
+        n_slots = slot_node.shape[0]
+        tris = np.stack([2 * slot_pix, 2 * slot_pix + 1], axis=1)  # (n_slots, 2)
+        tri_nodes = lat.triangles[tris]  # (n_slots, 2, 3)
+        hit = tri_nodes == slot_node[:, None, None]
+        contains = hit.any(axis=2)  # (n_slots, 2)
+        slot_nvar = contains.sum(axis=1).astype(np.int64)
+        slot_y = img[slot_pix]
+        slot_w = np.full(n_slots, 0.5)
+        # Fixed triangle: the one of a pixel's two that does not contain the node.
+        fixed_slot = np.flatnonzero(slot_nvar == 1)
+        fixed_tri = np.where(contains[fixed_slot, 0], 1, 0)
+        fix_nodes = tri_nodes[fixed_slot, fixed_tri]  # (n_fixed, 3)
+        fix_feat = np.zeros((5, n_slots))
+        if fixed_slot.size:
+            fix_feat[:, fixed_slot] = _separable_geometry(model, Q[fix_nodes], scene).T
+        vs, vt = np.nonzero(contains)  # row-major: sorted by slot, then triangle
+        var_nodes = tri_nodes[vs, vt]  # (n_var, 3)
+        var_pos = np.argmax(hit[vs, vt], axis=1)
+    else:
+        indptr, order = lat.node_cliques
+        cl = lat.cliques[order]
+        slot_node = cl[:, 0].astype(np.int64)
+        n_slots = slot_node.shape[0]
+        slot_y = img[lat.clique_pixel[order]]
+        slot_w = np.ones(n_slots)
+        slot_nvar = np.ones(n_slots, dtype=np.int64)
+        fix_feat = np.zeros((5, n_slots))
+        vs = np.arange(n_slots, dtype=np.int64)
+        var_nodes = cl.astype(np.int64)
+        var_pos = np.zeros(n_slots, dtype=np.int64)
+
+    slot_ptr = np.zeros(n_nodes + 1, dtype=np.int64)
+    np.cumsum(np.bincount(slot_node, minlength=n_nodes), out=slot_ptr[1:])
+    if np.any(np.diff(slot_ptr) > 8):
+        raise ValueError("a node has more than 8 data-term slots; the kernel supports 8")
+
+    # Variable triangles: vertices at observed points, the node's own vertex at each label.
+    var_node = slot_node[vs]
+    n_var = var_node.shape[0]
+    nv = np.bincount(var_node, minlength=n_nodes).astype(np.int64)
+    first = np.zeros(n_nodes + 1, dtype=np.int64)
+    np.cumsum(nv, out=first[1:])
+    t_in_node = np.arange(n_var, dtype=np.int64) - first[var_node]
+    var_ptr = first * B
+    var_feat = np.empty((5, n_var * B))
+    labels = np.arange(B, dtype=np.int64)
+    # Entry of (variable triangle v, label s): var_ptr[node] + t * B + s.
+    dest = var_ptr[var_node][:, None] + t_in_node[:, None] * B + labels[None, :]  # (n_var, B)
+    step = max(1, _GEOM_BATCH // B)
+    for a in range(0, n_var, step):
+        sl = slice(a, a + step)
+        pts = np.repeat(Q[var_nodes[sl]][:, None], B, axis=1)  # (m, B, 3, 3)
+        m = pts.shape[0]
+        pts[np.arange(m)[:, None], labels[None, :], var_pos[sl][:, None]] = P[var_node[sl]]
+        feats = _separable_geometry(model, pts.reshape(m * B, 3, 3), scene)
+        var_feat[:, dest[sl].reshape(-1)] = feats.T
+
+    return DataTables(
+        nodes=np.arange(n_nodes, dtype=np.int64), slot_ptr=slot_ptr, slot_y=slot_y,
+        slot_w=slot_w, slot_nvar=slot_nvar, fix_feat=fix_feat, var_ptr=var_ptr,
+        var_feat=var_feat, n_labels=B, data_term=data_term)
+
+
+def energies_reference(tables: DataTables, coef: np.ndarray, sigma_b: float) -> np.ndarray:
+    """Data energies ``U^A`` (N, n, B) by plain numpy, for tests on tiny lattices."""
+    coef = np.asarray(coef, dtype=np.float64)
+    N, n, B = coef.shape[0], tables.n_nodes, tables.n_labels
+    fix = reflectance.radiance(coef, tables.fix_feat.T)  # (N, n_slots)
+    var = reflectance.radiance(coef, tables.var_feat.T)  # (N, n_entries)
+    out = np.zeros((N, n, B))
+    for i in range(n):
+        s0, s1 = tables.slot_ptr[i], tables.slot_ptr[i + 1]
+        for s in range(B):
+            e = tables.var_ptr[i] + s
+            for j in range(s0, s1):
+                pred = fix[:, j].copy()
+                for _ in range(tables.slot_nvar[j]):
+                    pred += var[:, e]
+                    e += B
+                out[:, i, s] += np.abs(tables.slot_y[j] - tables.slot_w[j] * pred) / sigma_b
+    return out

@@ -1,0 +1,340 @@
+"""A generic MRF that is not about BRDFs: the auto-logistic Ising / Potts model.
+
+Sites of an H x W grid take one of ``q`` states; each site interacts with its
+four (first-order, Ising) neighbours (6.2, Fig. 6.2). The Gibbs distribution
+(4.3-4.5 with T = 1) is
+
+    ``p(x | theta) = exp(J S_J(x) + sum_{a>=1} h_a S_a(x)) / Z(theta)``,
+
+``S_J`` the number of neighbouring pairs in equal states, ``S_a`` the number
+of sites in state ``a`` (state 0 is the reference, ``h_0 = 0``). Parameters
+``theta = (J, h_1, ..., h_{q-1})``: ``("coupling", "field")`` for ``q = 2``
+and ``("coupling", "field_1", ...)`` for ``q > 2``. For ``q = 2`` this is the
+Ising model: with spins ``s = 2x - 1``, ``delta(x_i, x_j) = (1 + s_i s_j)/2``
+and ``[x_i = 1] = (1 + s_i)/2``, so ``J S_J + h S_1`` equals
+``J/2 sum_<ij> s_i s_j + h/2 sum_i s_i`` up to a constant (coupling ``J/2``
+and field ``h/2`` in the spin convention; the critical coupling of the
+infinite square lattice, ``log(1 + sqrt 2)/2 = 0.4407`` in spins, is
+``J = 0.8814`` here).
+
+* :class:`PottsPseudoLikelihood`: Besag's pseudolikelihood (4.23-4.24) of one
+  or more observed configurations, ``sum_i log p(x_i | x_N_i)`` with
+  ``p(x_i = a | x_N_i) ∝ exp(J n_i(a) + h_a)`` and ``n_i(a)`` the neighbours
+  of ``i`` in state ``a``. The per-site terms depend only on
+  ``(n_i(.), x_i)``, so the target keeps the distinct rows and their counts:
+  its cost does not grow with the lattice.
+* :class:`PottsExactLikelihood`: the exact log-likelihood, with ``log Z``
+  by enumerating all ``q^(HW)`` configurations (tiny lattices only), grouped
+  by their sufficient statistics.
+* :func:`gibbs_sample`: configurations drawn at known parameters by
+  checkerboard Gibbs sweeps, reproducible from ``seed``.
+
+A student can draw data at known parameters, then compare the PL maximiser
+(:func:`mrfpe.targets.maximise`) or a sampler's PL posterior with exact ML.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from mrfpe.targets.base import Target, as_theta_batch
+
+__all__ = [
+    "PottsExactLikelihood",
+    "PottsPseudoLikelihood",
+    "gibbs_sample",
+    "neighbour_counts",
+    "param_names",
+    "sufficient_statistics",
+]
+
+#: Largest number of configurations :class:`PottsExactLikelihood` enumerates.
+MAX_CONFIGURATIONS = 1 << 22
+
+
+def param_names(n_states: int) -> tuple[str, ...]:
+    """Parameter names of the q-state model."""
+    if n_states == 2:
+        return ("coupling", "field")
+    return ("coupling", *(f"field_{a}" for a in range(1, n_states)))
+
+
+def _default_bounds(n_states: int) -> np.ndarray:
+    return np.array([[-2.0, 2.0]] + [[-3.0, 3.0]] * (n_states - 1))
+
+
+def _check_states(n_states: Any) -> int:
+    if isinstance(n_states, bool) or not isinstance(n_states, int | np.integer) or n_states < 2:
+        raise ValueError(f"n_states must be an integer >= 2; got {n_states!r}")
+    return int(n_states)
+
+
+def _configs(x: Any, n_states: int | None, name: str = "configurations") -> tuple[np.ndarray, int]:
+    """Validate (H, W) or (M, H, W) integer states; return (M, H, W) int64 and q."""
+    arr = np.asarray(x)
+    if arr.dtype.kind == "f" and np.all(np.isfinite(arr)) and np.all(arr == np.round(arr)):
+        arr = arr.astype(np.int64)
+    if arr.dtype.kind not in "iu":
+        raise ValueError(f"{name} must hold integer states; got dtype {arr.dtype}")
+    if arr.ndim == 2:
+        arr = arr[None]
+    if arr.ndim != 3 or min(arr.shape) < 1:
+        raise ValueError(f"{name} must have shape (H, W) or (M, H, W); got {np.shape(x)}")
+    arr = arr.astype(np.int64)
+    q = max(2, int(arr.max()) + 1) if n_states is None else _check_states(n_states)
+    if arr.min() < 0 or arr.max() >= q:
+        raise ValueError(f"{name} must lie in [0, {q - 1}] for n_states={q}; "
+                         f"got [{arr.min()}, {arr.max()}]")
+    return arr, q
+
+
+def _bounds(bounds: Any, q: int) -> np.ndarray:
+    if bounds is None:
+        return _default_bounds(q)
+    b = np.asarray(bounds, dtype=np.float64)
+    if b.shape != (q, 2) or not np.all(np.isfinite(b)) or np.any(b[:, 0] >= b[:, 1]):
+        raise ValueError(f"bounds must be a finite ({q}, 2) array with lower < upper; "
+                         f"got {np.asarray(bounds).tolist()}")
+    return b
+
+
+def neighbour_counts(x: np.ndarray, n_states: int) -> np.ndarray:
+    """``n_i(a)``: first-order neighbours of each site in each state, (M, H, W, q)."""
+    x = np.asarray(x)
+    onehot = (x[..., None] == np.arange(n_states)).astype(np.int64)
+    out = np.zeros_like(onehot)
+    out[:, 1:] += onehot[:, :-1]
+    out[:, :-1] += onehot[:, 1:]
+    out[:, :, 1:] += onehot[:, :, :-1]
+    out[:, :, :-1] += onehot[:, :, 1:]
+    return out
+
+
+def sufficient_statistics(x: Any, n_states: int) -> np.ndarray:
+    """``(S_J, S_1, ..., S_{q-1})`` of each configuration, (M, q) float64."""
+    x = np.asarray(x)
+    if x.ndim == 2:
+        x = x[None]
+    sj = (x[:, 1:, :] == x[:, :-1, :]).sum(axis=(1, 2)) + (x[:, :, 1:] == x[:, :, :-1]).sum(
+        axis=(1, 2))
+    sa = [(x == a).sum(axis=(1, 2)) for a in range(1, n_states)]
+    return np.stack([sj, *sa], axis=1).astype(np.float64)
+
+
+def _logsumexp(a: np.ndarray, axis: int) -> np.ndarray:
+    m = np.max(a, axis=axis, keepdims=True)
+    m = np.where(np.isfinite(m), m, 0.0)
+    return np.squeeze(m, axis=axis) + np.log(np.sum(np.exp(a - m), axis=axis))
+
+
+class PottsPseudoLikelihood(Target):
+    """Pseudolikelihood of observed Potts/Ising configurations (4.23-4.24).
+
+    Parameters
+    ----------
+    configurations : (H, W) or (M, H, W) int
+        Observed configuration(s) (independent draws; their PLs add up).
+    n_states : int, optional
+        ``q``; inferred as ``max(state) + 1`` (at least 2) if omitted.
+    bounds : (q, 2), optional
+        Sampling-space bounds of (coupling, fields); default coupling in [-2, 2],
+        fields in [-3, 3]. The sampling space is the natural one (``to_natural``
+        is the identity).
+    """
+
+    name = "potts"
+
+    def __init__(self, configurations: Any, n_states: int | None = None,
+                 bounds: Any = None) -> None:
+        x, q = _configs(configurations, n_states)
+        self.n_states = q
+        self.param_names = param_names(q)
+        self.bounds = _bounds(bounds, q)
+        self.configurations = x
+        _, H, W = x.shape
+        self._n_total = H * W
+        self._set_sites(np.arange(H * W))
+
+    def _set_sites(self, sites: np.ndarray) -> None:
+        """Keep the distinct (n_i(.), x_i) rows of ``sites`` and their counts."""
+        x, q = self.configurations, self.n_states
+        M, H, W = x.shape
+        counts = neighbour_counts(x, q).reshape(M, H * W, q)
+        states = x.reshape(M, H * W)
+        self.sites = np.asarray(sites, dtype=np.int64)
+        self.cost = self.sites.shape[0] / self._n_total
+        rows = np.concatenate([counts[:, self.sites].reshape(-1, q),
+                               states[:, self.sites].reshape(-1, 1)], axis=1)
+        if rows.shape[0]:
+            self._rows, self._weight = np.unique(rows, axis=0, return_counts=True)
+        else:
+            self._rows, self._weight = np.zeros((0, q + 1), dtype=np.int64), np.zeros(0, int)
+
+    def _log_prob(self, theta: np.ndarray) -> np.ndarray:
+        if self._rows.shape[0] == 0:
+            return np.zeros(theta.shape[0])
+        q = self.n_states
+        J = theta[:, :1, None]  # (N, 1, 1)
+        h = np.concatenate([np.zeros((theta.shape[0], 1)), theta[:, 1:]], axis=1)[:, None, :]
+        n = self._rows[None, :, :q].astype(np.float64)
+        e = J * n + h  # (N, R, q): log of the unnormalised conditional
+        own = np.take_along_axis(e, np.broadcast_to(self._rows[None, :, q:], (e.shape[0],
+                                                    e.shape[1], 1)), axis=2)[..., 0]
+        return (self._weight[None] * (own - _logsumexp(e, axis=2))).sum(axis=1)
+
+    def partition(self, k: int, kind: str = "strided") -> list[PottsPseudoLikelihood]:
+        """Sub-lattice PLs over disjoint site subsets (5.67, 5.68) that sum to this one."""
+        n = self.sites.shape[0]
+        if isinstance(k, bool) or not isinstance(k, int | np.integer) or not 1 <= k <= n:
+            raise ValueError(f"k must be an integer in [1, {n}]; got {k!r}")
+        if kind == "strided":
+            groups = [self.sites[j::int(k)] for j in range(int(k))]
+        elif kind == "block":
+            groups = np.array_split(self.sites, int(k))
+        else:
+            raise ValueError(f"kind must be 'strided' or 'block'; got {kind!r}")
+        parts = []
+        for g in groups:
+            part = object.__new__(type(self))
+            part.__dict__.update({k: self.__dict__[k] for k in (
+                "n_states", "param_names", "bounds", "configurations", "_n_total")})
+            part._set_sites(g)
+            parts.append(part)
+        return parts
+
+    def describe(self) -> dict:
+        M, H, W = self.configurations.shape
+        return {"name": self.name, "class": type(self).__name__,
+                "param_names": list(self.param_names), "bounds": self.bounds.tolist(),
+                "n_states": self.n_states, "shape": [H, W], "n_configurations": M,
+                "n_sites": int(self.sites.shape[0]), "cost": float(self.cost)}
+
+
+class PottsExactLikelihood(Target):
+    """Exact log-likelihood ``sum_m log p(x_m | theta)`` with ``Z`` by enumeration.
+
+    Only for tiny lattices: ``q^(H W)`` must not exceed :data:`MAX_CONFIGURATIONS`.
+    Parameters as :class:`PottsPseudoLikelihood`.
+    """
+
+    name = "potts_exact"
+
+    def __init__(self, configurations: Any, n_states: int | None = None,
+                 bounds: Any = None) -> None:
+        x, q = _configs(configurations, n_states)
+        M, H, W = x.shape
+        if float(q) ** (H * W) > MAX_CONFIGURATIONS:
+            raise ValueError(f"configurations of shape ({H}, {W}) with {q} states have "
+                             f"{q}^{H * W} configurations; exact enumeration is limited to "
+                             f"{MAX_CONFIGURATIONS}")
+        self.n_states = q
+        self.param_names = param_names(q)
+        self.bounds = _bounds(bounds, q)
+        self.configurations = x
+        self._stats_obs = sufficient_statistics(x, q).sum(axis=0)  # (q,)
+        self._n_obs = M
+        # All configurations, as base-q digits, grouped by their sufficient statistics.
+        n = H * W
+        stats = []
+        codes = np.arange(q ** n, dtype=np.int64)
+        for a in range(0, codes.shape[0], 1 << 16):
+            c = codes[a:a + (1 << 16)]
+            digits = (c[:, None] // (q ** np.arange(n, dtype=np.int64))[None, :]) % q
+            stats.append(sufficient_statistics(digits.reshape(-1, H, W), q))
+        self._stats, self._mult = np.unique(np.concatenate(stats), axis=0, return_counts=True)
+
+    def log_partition(self, theta: Any) -> np.ndarray:
+        """``log Z(theta)`` (N,) by enumeration."""
+        theta = as_theta_batch(theta, self.ndim)
+        e = theta @ self._stats.T + np.log(self._mult)[None, :]
+        return _logsumexp(e, axis=1)
+
+    def _log_prob(self, theta: np.ndarray) -> np.ndarray:
+        return theta @ self._stats_obs - self._n_obs * self.log_partition(theta)
+
+    def describe(self) -> dict:
+        M, H, W = self.configurations.shape
+        return {"name": self.name, "class": type(self).__name__,
+                "param_names": list(self.param_names), "bounds": self.bounds.tolist(),
+                "n_states": self.n_states, "shape": [H, W], "n_configurations": M}
+
+
+def gibbs_sample(theta: Any, shape: tuple[int, int], n_states: int = 2, *, n_samples: int = 1,
+                 n_sweeps: int = 200, thin: int = 10, seed: int | None = None,
+                 init: Any = "random") -> np.ndarray:
+    """Draw Potts/Ising configurations at known parameters by Gibbs sampling.
+
+    Checkerboard sweeps: the sites of one colour are conditionally independent
+    given the other colour (first-order neighbourhood), so each half-sweep
+    draws all of them at once from ``p(x_i = a | x_N_i) ∝ exp(J n_i(a) + h_a)``.
+
+    Parameters
+    ----------
+    theta : (q,)
+        ``(coupling, field_1, ..., field_{q-1})``.
+    shape : (H, W)
+    n_states : int
+    n_samples : int
+        Configurations returned: the state after ``n_sweeps`` burn-in sweeps,
+        then every ``thin`` sweeps.
+    n_sweeps, thin : int
+    seed : int or None
+        Every random draw comes from ``numpy.random.default_rng(seed)``.
+    init : "random" | (H, W) int
+        Starting configuration.
+
+    Returns
+    -------
+    (n_samples, H, W) int64
+    """
+    q = _check_states(n_states)
+    th = np.asarray(theta, dtype=np.float64).reshape(-1)
+    if th.shape != (q,) or not np.all(np.isfinite(th)):
+        raise ValueError(f"theta must be {q} finite numbers {param_names(q)}; got "
+                         f"{np.asarray(theta).tolist()}")
+    try:
+        H, W = (int(s) for s in shape)
+    except (TypeError, ValueError):
+        raise ValueError(f"shape must be (H, W); got {shape!r}") from None
+    if H < 1 or W < 1:
+        raise ValueError(f"shape must be positive; got {shape!r}")
+    for name, val, low in (("n_samples", n_samples, 1), ("n_sweeps", n_sweeps, 0),
+                           ("thin", thin, 1)):
+        if isinstance(val, bool) or not isinstance(val, int | np.integer) or val < low:
+            raise ValueError(f"{name} must be an integer >= {low}; got {val!r}")
+    rng = np.random.default_rng(seed)
+    if isinstance(init, str):
+        if init != "random":
+            raise ValueError(f"init must be 'random' or an (H, W) configuration; got {init!r}")
+        x = rng.integers(0, q, size=(H, W))
+    else:
+        x = _configs(init, q, "init")[0]
+        if x.shape != (1, H, W):
+            raise ValueError(f"init must have shape {(H, W)}; got {np.shape(init)}")
+        x = x[0].copy()
+    J = th[0]
+    h = np.concatenate([[0.0], th[1:]])
+    colour = (np.add.outer(np.arange(H), np.arange(W)) % 2).astype(bool)
+    masks = (~colour, colour)
+
+    def sweep(x: np.ndarray) -> None:
+        for m in masks:
+            n = neighbour_counts(x[None], q)[0][m]  # (n_m, q)
+            logits = J * n + h
+            logits -= logits.max(axis=1, keepdims=True)
+            p = np.exp(logits)
+            cdf = np.cumsum(p, axis=1)
+            u = rng.random(n.shape[0]) * cdf[:, -1]
+            x[m] = np.minimum((u[:, None] >= cdf).sum(axis=1), q - 1)
+
+    out = np.empty((int(n_samples), H, W), dtype=np.int64)
+    for _ in range(int(n_sweeps)):
+        sweep(x)
+    for s in range(int(n_samples)):
+        if s:
+            for _ in range(int(thin)):
+                sweep(x)
+        out[s] = x
+    return out

@@ -1,0 +1,513 @@
+"""Conformance suite for sampler plugins (like scikit-learn's ``check_estimator``).
+
+Third-party authors run it on their own sampler::
+
+    from mrfpe.testing import check_sampler
+    check_sampler(MySampler)            # or check_sampler("my_name") once registered
+
+Every check is a public function ``check_<name>(sampler, config=None, **options)``
+that raises ``AssertionError`` with a clear message; :func:`check_sampler` runs
+them all and reports every failure at once. The analytic targets the checks use
+are public too: :class:`CorrelatedGaussian` (3-D, in the unit cube, with a
+``partition`` into "observation" subsets that mimics a lattice's sub-lattices,
+and ``residuals``), :class:`TwoModes` and :class:`MostlyMinusInf`.
+
+Declaring what does not apply
+-----------------------------
+A sampler may set the class attribute ``conformance``, a dict whose keys are
+check names (see :data:`CHECKS`) and whose values are ``False`` (the check does
+not apply: it is skipped and reported as skipped), or a dict of options for
+that check (e.g. looser tolerances). The special key ``"quick_config"`` holds
+the keyword configuration used when ``quick=True`` (a small budget so the suite
+runs in seconds); without it the defaults are used. Example, for a multi-start
+optimiser whose sample set is a set of optima, not a draw from the target::
+
+    class MultiStart:
+        conformance = {
+            "quick_config": {"n_seeds": 27},
+            "gaussian_moments": False,   # optima do not sample the moments
+        }
+
+Keep such declarations explicit and explain them in the sampler's docs: a
+skipped check is a documented limitation, not a silent pass.
+"""
+
+from __future__ import annotations
+
+import inspect
+import json
+import math
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import xarray as xr
+
+from mrfpe import posterior as _post
+from mrfpe.targets.base import Target, as_theta_batch
+
+__all__ = [
+    "CHECKS", "CorrelatedGaussian", "MostlyMinusInf", "TwoModes", "check_bounds",
+    "check_callback", "check_config", "check_gaussian_moments", "check_interface",
+    "check_map_trace", "check_mostly_minus_inf", "check_netcdf_roundtrip",
+    "check_reproducible", "check_sampler", "check_schema", "check_two_modes",
+]
+
+
+# --------------------------------------------------------------------------
+# Analytic targets
+# --------------------------------------------------------------------------
+class CorrelatedGaussian(Target):
+    """A correlated 3-D Gaussian posterior inside the unit cube, built like an MRF target.
+
+    The log density is a sum over ``n_obs`` "observations" ``x_m`` (the analogue
+    of lattice nodes): ``log p(θ) = Σ_m log N(x_m | θ, Σ_obs)``, so that, with a
+    flat prior, the posterior is ``N(mean, Σ_obs / n_obs)`` exactly (the
+    observations are centred so their mean is ``mean``). The density is
+    truncated to the unit cube, more than 5 sd from any face, so ``mean`` and
+    ``cov`` are the moments of the target to within 1e-6.
+
+    ``partition(k, kind)`` splits the observations into ``k`` strided
+    (``{n, n+k, ...}``) or contiguous blocks whose log densities sum exactly to
+    the full one (each with ``cost`` = its share of the observations), and
+    ``residuals(θ)`` returns the whitened errors ``r`` with
+    ``log p(θ) = const - ½‖r‖²``.
+    """
+
+    param_names = ("x", "y", "z")
+    bounds = np.array([[0.0, 1.0]] * 3)
+    mean = np.array([0.45, 0.55, 0.5])
+    sd = np.array([0.05, 0.04, 0.06])
+    corr = np.array([[1.0, 0.6, -0.3], [0.6, 1.0, 0.2], [-0.3, 0.2, 1.0]])
+
+    def __init__(self, n_obs: int = 60, *, _obs: np.ndarray | None = None, cost: float = 1.0):
+        self.cov = self.corr * np.outer(self.sd, self.sd)
+        self.n_total = int(n_obs)
+        if _obs is None:
+            if self.n_total < 4:
+                raise ValueError(f"n_obs must be >= 4; got {n_obs}")
+            cov_obs = self.cov * self.n_total
+            z = np.random.default_rng(12345).multivariate_normal(np.zeros(3), cov_obs,
+                                                                 self.n_total)
+            _obs = self.mean + z - z.mean(axis=0)
+        self.obs = np.asarray(_obs, dtype=np.float64)
+        self.cost = float(cost)
+        self._prec_obs = np.linalg.inv(self.cov * self.n_total)
+        self._chol = np.linalg.cholesky(self._prec_obs)  # prec = L Lᵀ, r = Lᵀ(x - θ)
+        self._log_norm = -0.5 * (3 * math.log(2 * math.pi)
+                                 + np.linalg.slogdet(self.cov * self.n_total)[1])
+        m = self.obs.mean(axis=0)
+        dev = self.obs - m
+        self._m, self._k = m, self.obs.shape[0]
+        self._const = self._k * self._log_norm - 0.5 * np.einsum(
+            "ij,jk,ik->", dev, self._prec_obs, dev)
+
+    def _log_prob(self, theta: np.ndarray) -> np.ndarray:
+        # Σ_m (x_m-θ)ᵀP(x_m-θ) = k (θ-m̄)ᵀP(θ-m̄) + Σ_m (x_m-m̄)ᵀP(x_m-m̄)
+        e = theta - self._m
+        return self._const - 0.5 * self._k * np.einsum("ij,jk,ik->i", e, self._prec_obs, e)
+
+    def residuals(self, theta: Any) -> np.ndarray:
+        """Whitened errors (N, 3·n_obs): ``log_prob = const - ½ Σ r²`` inside the cube."""
+        theta = as_theta_batch(theta, 3)
+        diff = self.obs[None, :, :] - theta[:, None, :]  # (N, M, 3)
+        return (diff @ self._chol).reshape(theta.shape[0], -1)
+
+    def partition(self, k: int, kind: str = "strided") -> list[CorrelatedGaussian]:
+        """``k`` sub-targets over disjoint observation subsets; their log_probs sum to ours."""
+        if isinstance(k, bool) or not isinstance(k, int | np.integer) or not 1 <= k <= self._k:
+            raise ValueError(f"k must be an integer in [1, {self._k}]; got {k!r}")
+        if kind not in ("strided", "block"):
+            raise ValueError(f"kind must be 'strided' or 'block'; got {kind!r}")
+        idx = ([np.arange(n, self._k, k) for n in range(k)] if kind == "strided"
+               else np.array_split(np.arange(self._k), k))
+        parts = []
+        for ix in idx:
+            sub = CorrelatedGaussian(self.n_total, _obs=self.obs[ix],
+                                     cost=self.cost * len(ix) / self._k)
+            parts.append(sub)
+        return parts
+
+    def describe(self) -> dict:
+        return {**super().describe(), "n_obs": int(self._k)}
+
+
+class TwoModes(Target):
+    """Two Gaussian bumps in the unit square; the ``high`` mode's peak is ``e``× the other's.
+
+    ``log p = logsumexp(-½‖θ-μ_high‖²/s², -1 - ½‖θ-μ_low‖²/s²)``, s = 0.06. The
+    global maximum is at ``high`` (to within 1e-9: the low bump's tail there is
+    ~e^-80). ``residuals(θ) = [sqrt(2(c - log p)), 0]`` with ``c = log p(high) + 1``.
+    """
+
+    param_names = ("u", "v")
+    bounds = np.array([[0.0, 1.0], [0.0, 1.0]])
+    high = np.array([0.72, 0.3])
+    low = np.array([0.28, 0.68])
+    scale = 0.06
+
+    def _log_prob(self, theta: np.ndarray) -> np.ndarray:
+        a = -0.5 * np.sum((theta - self.high) ** 2, axis=1) / self.scale**2
+        b = -1.0 - 0.5 * np.sum((theta - self.low) ** 2, axis=1) / self.scale**2
+        return np.logaddexp(a, b)
+
+    @property
+    def max_log_prob(self) -> float:
+        return float(self.log_prob(self.high)[0])
+
+    def residuals(self, theta: Any) -> np.ndarray:
+        theta = as_theta_batch(theta, 2)
+        lp = self.log_prob(theta)
+        r = np.sqrt(2.0 * (self.max_log_prob + 1.0 - lp))
+        return np.stack([r, np.zeros_like(r)], axis=1)
+
+
+class MostlyMinusInf(Target):
+    """``-inf`` everywhere in the unit cube except a small box (0.3% of the volume).
+
+    Inside the box ``[0.61, 0.76] × [0.2, 0.35] × [0.45, 0.6]`` the density is a
+    gentle Gaussian bump; an evenly spaced grid of 1000 points hits it at most a
+    few times and a random draw almost never.
+    """
+
+    param_names = ("a", "b", "c")
+    bounds = np.array([[0.0, 1.0]] * 3)
+    box = np.array([[0.61, 0.76], [0.2, 0.35], [0.45, 0.6]])
+
+    def _log_prob(self, theta: np.ndarray) -> np.ndarray:
+        inside = np.all((theta >= self.box[:, 0]) & (theta <= self.box[:, 1]), axis=1)
+        centre = self.box.mean(axis=1)
+        out = np.full(theta.shape[0], -np.inf)
+        out[inside] = -0.5 * np.sum((theta[inside] - centre) ** 2, axis=1) / 0.05**2
+        return out
+
+    def residuals(self, theta: Any) -> np.ndarray:
+        theta = as_theta_batch(theta, 3)
+        lp = self.log_prob(theta)
+        r = np.sqrt(2.0 * (1.0 - lp))  # +inf outside the box, like the log density
+        return np.stack([r, np.zeros_like(r), np.zeros_like(r)], axis=1)
+
+
+# --------------------------------------------------------------------------
+# Plumbing
+# --------------------------------------------------------------------------
+def _resolve(sampler: Any) -> tuple[type, str]:
+    if isinstance(sampler, str):
+        from mrfpe.samplers import get
+
+        return get(sampler), sampler
+    if not inspect.isclass(sampler):
+        raise ValueError(f"sampler must be a class or a registered name; got {sampler!r}")
+    return sampler, sampler.__name__
+
+
+def _declared(cls: type, check: str) -> Any:
+    return getattr(cls, "conformance", {}).get(check, True)
+
+
+def _run(cls: type, config: dict | None, target: Target, seed: int, **kw: Any) -> xr.Dataset:
+    return cls(**(config or {})).run(target, seed=seed, progress=kw.pop("progress", False),
+                                     callback=kw.pop("callback", None))
+
+
+_CACHE: dict[tuple, xr.Dataset] = {}
+
+
+def _cached_run(cls: type, config: dict | None, target_cls: type, seed: int) -> xr.Dataset:
+    """One run per (sampler, config, target, seed) and process; returns a deep copy."""
+    key = (cls, json.dumps(config or {}, sort_keys=True, default=repr), target_cls, seed)
+    if key not in _CACHE:
+        if len(_CACHE) > 32:
+            _CACHE.clear()
+        _CACHE[key] = _run(cls, config, target_cls(), seed)
+    return _CACHE[key].copy(deep=True)
+
+
+def _fail(name: str, check: str, msg: str) -> AssertionError:
+    return AssertionError(f"{check} failed for sampler {name}: {msg}")
+
+
+# --------------------------------------------------------------------------
+# Checks
+# --------------------------------------------------------------------------
+def check_interface(sampler: Any, config: dict | None = None) -> None:
+    """The registry's interface rules: a class, constructible with no arguments,
+    ``run(target, *, seed, progress, callback)``."""
+    cls, name = _resolve(sampler)
+    from mrfpe.samplers.registry import validate_sampler
+
+    try:
+        validate_sampler(cls)
+        cls()
+    except Exception as exc:
+        raise _fail(name, "check_interface", f"{type(exc).__name__}: {exc}") from exc
+
+
+def check_config(sampler: Any, config: dict | None = None) -> None:
+    """Configs are explicit keyword arguments with validated values.
+
+    ``__init__`` takes no ``*args``/``**kwargs``; every parameter has a default;
+    a value of the wrong kind (``object()``; ``NaN`` for a float setting; an
+    unknown string for a string setting) raises ``ValueError``; an unknown
+    keyword raises ``TypeError``; and the posterior's ``config`` attribute
+    records every constructor argument.
+    """
+    cls, name = _resolve(sampler)
+    params = list(inspect.signature(cls.__init__).parameters.values())[1:]
+    var = [p.name for p in params if p.kind in (p.VAR_POSITIONAL, p.VAR_KEYWORD)]
+    if var:
+        raise _fail(name, "check_config", f"__init__ must not take *args/**kwargs ({var})")
+    for p in params:
+        bad_values: list[Any] = [object()]
+        if isinstance(p.default, float):
+            bad_values.append(float("nan"))
+        if isinstance(p.default, str):
+            bad_values.append("\x00not-a-valid-choice")
+        for bad in bad_values:
+            try:
+                cls(**{p.name: bad})
+            except ValueError:
+                continue
+            except Exception as exc:
+                raise _fail(name, "check_config", f"{p.name}={bad!r} raised "
+                            f"{type(exc).__name__} instead of ValueError: {exc}") from exc
+            raise _fail(name, "check_config", f"{p.name}={bad!r} was accepted; "
+                        "invalid settings must raise ValueError at construction")
+    try:
+        cls(**{"no_such_setting_xyz": 1})
+    except TypeError:
+        pass
+    else:
+        raise _fail(name, "check_config", "an unknown keyword was accepted")
+    post = _cached_run(cls, config, CorrelatedGaussian, 0)
+    recorded = json.loads(post.attrs["config"])
+    missing = [p.name for p in params if p.name not in recorded]
+    if missing:
+        raise _fail(name, "check_config", f"posterior attrs['config'] lacks {missing}")
+
+
+def check_schema(sampler: Any, config: dict | None = None) -> None:
+    """The posterior passes :func:`mrfpe.posterior.validate` and describes the target."""
+    cls, name = _resolve(sampler)
+    post = _cached_run(cls, config, CorrelatedGaussian, 0)
+    try:
+        _post.validate(post)
+    except ValueError as exc:
+        raise _fail(name, "check_schema", str(exc)) from exc
+    names = [str(p) for p in post["param"].values]
+    if names != list(CorrelatedGaussian.param_names):
+        raise _fail(name, "check_schema", f"param coordinate {names} != target's param_names")
+    if post.attrs["seed"] != 0:
+        raise _fail(name, "check_schema", f"attrs['seed'] = {post.attrs['seed']}, ran with 0")
+    if not post.attrs["n_target_evals"] > 0:
+        raise _fail(name, "check_schema", "n_target_evals must count the evaluations (> 0)")
+    if not post.attrs["wall_time_s"] >= 0:
+        raise _fail(name, "check_schema", "wall_time_s must be >= 0")
+
+
+def _numbers(post: xr.Dataset) -> xr.Dataset:
+    out = post.copy()
+    out.attrs = {k: v for k, v in post.attrs.items() if k != "wall_time_s"}
+    return out
+
+
+def check_reproducible(sampler: Any, config: dict | None = None) -> None:
+    """Same seed -> identical numbers; a different seed -> different samples."""
+    cls, name = _resolve(sampler)
+    a = _cached_run(cls, config, CorrelatedGaussian, 0)
+    b = _run(cls, config, CorrelatedGaussian(), 0)
+    try:
+        xr.testing.assert_identical(_numbers(a), _numbers(b))
+    except AssertionError as exc:
+        raise _fail(name, "check_reproducible", f"two runs with seed=0 differ:\n{exc}") from exc
+    c = _run(cls, config, CorrelatedGaussian(), 1)
+    if a["theta"].shape == c["theta"].shape and np.array_equal(a["theta"], c["theta"]):
+        raise _fail(name, "check_reproducible", "seeds 0 and 1 gave identical samples")
+
+
+def check_bounds(sampler: Any, config: dict | None = None) -> None:
+    """Samples and the MAP trace lie inside the target's bounds (all three targets)."""
+    cls, name = _resolve(sampler)
+    for tcls in (CorrelatedGaussian, TwoModes, MostlyMinusInf):
+        post = _cached_run(cls, config, tcls, 0)
+        b = tcls.bounds
+        for var in ("theta", "map_theta"):
+            x = post[var].values
+            bad = ~np.all((x >= b[:, 0]) & (x <= b[:, 1]), axis=-1)
+            if bad.any():
+                raise _fail(name, "check_bounds", f"{int(bad.sum())} rows of {var} outside the "
+                            f"bounds of {tcls.__name__}, e.g. {x[bad][0]}")
+
+
+def check_gaussian_moments(sampler: Any, config: dict | None = None, *, mean_tol: float = 0.5,
+                           sd_ratio: tuple[float, float] = (0.6, 1.6),
+                           corr_tol: float = 0.3) -> None:
+    """On :class:`CorrelatedGaussian` the weighted mean and covariance are close to the truth.
+
+    Tolerances: ``|mean_i - μ_i| <= mean_tol · sd_i``; each weighted sd within
+    ``sd_ratio`` times the true sd; each correlation within ``corr_tol``.
+    """
+    cls, name = _resolve(sampler)
+    post = _cached_run(cls, config, CorrelatedGaussian, 0)
+    t = CorrelatedGaussian()
+    m, c = _post.weighted_mean(post), _post.weighted_cov(post)
+    err = np.abs(m - t.mean) / t.sd
+    if np.any(err > mean_tol):
+        raise _fail(name, "check_gaussian_moments", f"weighted mean {m.round(4)} vs true "
+                    f"{t.mean}: errors {err.round(2)} sd > {mean_tol} sd")
+    sd = np.sqrt(np.clip(np.diag(c), 0, None))
+    ratio = sd / t.sd
+    if np.any(ratio < sd_ratio[0]) or np.any(ratio > sd_ratio[1]):
+        raise _fail(name, "check_gaussian_moments", f"weighted sd {sd.round(4)} vs true "
+                    f"{t.sd}: ratios {ratio.round(2)} outside {sd_ratio}")
+    corr = c / np.outer(sd, sd)
+    if np.any(np.abs(corr - t.corr) > corr_tol):
+        raise _fail(name, "check_gaussian_moments", f"weighted correlation\n{corr.round(2)}\n"
+                    f"vs true\n{t.corr}\ndiffers by more than {corr_tol}")
+
+
+def check_two_modes(sampler: Any, config: dict | None = None, *, tol: float = 0.05) -> None:
+    """On :class:`TwoModes` the MAP lies within ``tol`` of the higher mode."""
+    cls, name = _resolve(sampler)
+    post = _cached_run(cls, config, TwoModes, 0)
+    m, lt = _post.map_estimate(post)
+    d = float(np.linalg.norm(m - TwoModes.high))
+    if not d <= tol:
+        raise _fail(name, "check_two_modes", f"MAP {m.round(4)} (log target {lt:.3g}) is "
+                    f"{d:.3f} from the higher mode {TwoModes.high} (tolerance {tol})")
+
+
+def check_mostly_minus_inf(sampler: Any, config: dict | None = None) -> None:
+    """A target that is ``-inf`` almost everywhere is survived: a valid posterior, and
+    samples with ``log_target = -inf`` carry no weight unless every sample does."""
+    cls, name = _resolve(sampler)
+    try:
+        post = _cached_run(cls, config, MostlyMinusInf, 0)
+    except Exception as exc:
+        raise _fail(name, "check_mostly_minus_inf", f"raised {type(exc).__name__}: {exc}") from exc
+    try:
+        _post.validate(post)
+    except ValueError as exc:
+        raise _fail(name, "check_mostly_minus_inf", str(exc)) from exc
+    lt, lw = post["log_target"].values, post["log_weight"].values
+    carrying = int(np.sum(np.isneginf(lt) & np.isfinite(lw)))
+    if np.isfinite(lt).any() and carrying:
+        raise _fail(name, "check_mostly_minus_inf",
+                    f"{carrying} samples with log_target = -inf carry weight")
+
+
+def check_netcdf_roundtrip(sampler: Any, config: dict | None = None) -> None:
+    """:func:`mrfpe.posterior.save` then :func:`~mrfpe.posterior.load` returns the posterior
+    unchanged (values, dtypes, attributes)."""
+    cls, name = _resolve(sampler)
+    for tcls in (CorrelatedGaussian, MostlyMinusInf):
+        post = _cached_run(cls, config, tcls, 0)
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / "post.nc"
+            _post.save(post, path)
+            back = _post.load(path)
+        try:
+            xr.testing.assert_identical(back, post)
+        except AssertionError as exc:
+            raise _fail(name, "check_netcdf_roundtrip", f"{tcls.__name__}: {exc}") from exc
+        for k in post.variables:
+            if back[k].dtype != post[k].dtype:
+                raise _fail(name, "check_netcdf_roundtrip",
+                            f"{k}: dtype {post[k].dtype} came back as {back[k].dtype}")
+
+
+def check_map_trace(sampler: Any, config: dict | None = None, *, rtol: float = 1e-8) -> None:
+    """``map_log_target`` is the target's log density at ``map_theta`` and never decreases
+    (a best-so-far trace), and the final MAP is at least as good as every final sample."""
+    cls, name = _resolve(sampler)
+    for tcls in (CorrelatedGaussian, TwoModes):
+        post = _cached_run(cls, config, tcls, 0)
+        mt, ml = post["map_theta"].values, post["map_log_target"].values
+        fin = np.isfinite(ml)
+        lp = tcls().log_prob(mt[fin])
+        if not np.allclose(lp, ml[fin], rtol=rtol, atol=1e-9):
+            raise _fail(name, "check_map_trace", f"{tcls.__name__}: map_log_target "
+                        f"{ml[fin][:4]} != log_prob(map_theta) {lp[:4]}")
+        if np.any(np.diff(np.where(fin, ml, -np.inf)) < 0):
+            raise _fail(name, "check_map_trace", f"{tcls.__name__}: map_log_target decreases")
+        best = np.max(post["log_target"].values)
+        if best > ml[-1] + 1e-9 * max(1.0, abs(best)):
+            raise _fail(name, "check_map_trace", f"{tcls.__name__}: a final sample "
+                        f"(log target {best:.6g}) beats the final MAP ({ml[-1]:.6g})")
+
+
+def check_callback(sampler: Any, config: dict | None = None) -> None:
+    """``callback(step, info)`` is called per step with an int step and a dict, and
+    ``progress=True`` runs (the bar goes to stderr)."""
+    cls, name = _resolve(sampler)
+    calls: list[tuple[Any, Any]] = []
+    post = _run(cls, config, CorrelatedGaussian(), 0, progress=True,
+                callback=lambda step, info: calls.append((step, info)))
+    if not calls:
+        raise _fail(name, "check_callback", "callback was never called")
+    steps = [s for s, _ in calls]
+    if not all(isinstance(s, int | np.integer) for s in steps) or np.any(np.diff(steps) <= 0):
+        raise _fail(name, "check_callback", f"steps must be increasing ints; got {steps[:5]}...")
+    if not all(isinstance(i, dict) for _, i in calls):
+        raise _fail(name, "check_callback", "info must be a dict")
+    if len(calls) > post.sizes["step"] * 10_000:  # pragma: no cover - sanity bound
+        raise _fail(name, "check_callback", "callback called implausibly often")
+
+
+CHECKS: dict[str, Callable[..., None]] = {
+    "interface": check_interface,
+    "config": check_config,
+    "schema": check_schema,
+    "reproducible": check_reproducible,
+    "bounds": check_bounds,
+    "gaussian_moments": check_gaussian_moments,
+    "two_modes": check_two_modes,
+    "mostly_minus_inf": check_mostly_minus_inf,
+    "netcdf_roundtrip": check_netcdf_roundtrip,
+    "map_trace": check_map_trace,
+    "callback": check_callback,
+}
+
+
+def run_check(sampler: Any, check: str, *, quick: bool = True) -> str:
+    """Run one named check with the sampler's declarations; returns ``"passed"`` or
+    ``"skipped: declared"`` and raises ``AssertionError`` on failure."""
+    if check not in CHECKS:
+        raise ValueError(f"unknown check {check!r}; checks: {', '.join(CHECKS)}")
+    cls, _ = _resolve(sampler)
+    decl = _declared(cls, check)
+    if decl is False:
+        return "skipped: declared"
+    opts = decl if isinstance(decl, dict) else {}
+    config = getattr(cls, "conformance", {}).get("quick_config") if quick else None
+    CHECKS[check](cls, config, **opts)
+    return "passed"
+
+
+def check_sampler(sampler: Any, *, quick: bool = True) -> dict[str, str]:
+    """Run every conformance check on ``sampler`` (a class or a registered name).
+
+    Returns ``{check: "passed" | "skipped: declared"}``; raises one
+    ``AssertionError`` listing every failed check. ``quick=True`` runs with the
+    sampler's ``conformance["quick_config"]`` (its defaults otherwise).
+    """
+    cls, name = _resolve(sampler)
+    if not isinstance(getattr(cls, "conformance", {}), dict):
+        raise AssertionError(f"{name}.conformance must be a dict")
+    unknown = set(getattr(cls, "conformance", {})) - set(CHECKS) - {"quick_config"}
+    if unknown:
+        raise AssertionError(f"{name}.conformance names unknown checks {sorted(unknown)}; "
+                             f"known: {', '.join(CHECKS)}")
+    report, failures = {}, []
+    for check in CHECKS:
+        try:
+            report[check] = run_check(cls, check, quick=quick)
+        except AssertionError as exc:
+            report[check] = "failed"
+            failures.append(str(exc))
+    if failures:
+        raise AssertionError(f"{len(failures)} conformance check(s) failed:\n- "
+                             + "\n- ".join(failures))
+    return report

@@ -1,0 +1,138 @@
+"""The sampler registry: discovery, validation, broken plugins, CLI listing."""
+
+import importlib.metadata as md
+import subprocess
+import sys
+import types
+
+import pytest
+
+import mrfpe._plugins as plugins
+import mrfpe.samplers as samplers
+from mrfpe import cli
+from mrfpe.samplers.registry import validate_sampler
+
+BUILTINS = {"pmc", "sir", "ppf", "mh", "dw_q", "dw_r", "emcee", "lm_multiseed",
+            "nlopt_multiseed"}
+
+
+class Good:
+    """A good fake sampler."""
+
+    def __init__(self, n: int = 3):
+        self.n = n
+
+    def run(self, target, *, seed=None, progress=False, callback=None):
+        return None
+
+
+class NeedsArgs(Good):
+    def __init__(self, n):
+        self.n = n
+
+
+class NoKeywords:
+    def run(self, target, seed):
+        return None
+
+
+def not_a_class(target, *, seed=None, progress=False, callback=None):
+    return None
+
+
+@pytest.fixture
+def fake_plugins(monkeypatch):
+    mod = types.ModuleType("fake_mrfpe_plugin")
+    for obj in (Good, NeedsArgs, NoKeywords, not_a_class):
+        setattr(mod, obj.__name__, obj)
+    monkeypatch.setitem(sys.modules, "fake_mrfpe_plugin", mod)
+    real = md.entry_points(group="mrfpe.samplers")
+    fakes = [md.EntryPoint(n, v, "mrfpe.samplers") for n, v in [
+        ("fake_good", "fake_mrfpe_plugin:Good"),
+        ("fake_import", "no_such_module_for_mrfpe_tests:Thing"),
+        ("fake_args", "fake_mrfpe_plugin:NeedsArgs"),
+        ("fake_kw", "fake_mrfpe_plugin:NoKeywords"),
+        ("fake_func", "fake_mrfpe_plugin:not_a_class"),
+        ("pmc", "fake_mrfpe_plugin:Good"),  # duplicates a built-in name
+    ]]
+
+    def entry_points(**kw):
+        if kw.get("group") == "mrfpe.samplers":
+            return [*real, *fakes]
+        return md.entry_points(**kw)
+
+    monkeypatch.setattr(plugins.md, "entry_points", entry_points)
+    samplers.registry.entries(refresh=True)
+    yield
+    monkeypatch.undo()
+    samplers.registry.entries(refresh=True)
+
+
+def test_builtins_are_registered():
+    assert BUILTINS <= set(samplers.registry.entries())
+    assert {"pmc", "sir", "ppf"} <= set(samplers.available())
+    info = samplers.registry.entries()["pmc"]
+    assert info.package == "mrfpe" and info.version and "Population Monte Carlo" in info.description
+
+
+def test_broken_plugins_are_reported_not_raised(fake_plugins):
+    avail = samplers.available()
+    assert "fake_good" in avail and "pmc" in avail
+    broken = samplers.broken()
+    assert "ModuleNotFoundError" in broken["fake_import"]
+    assert "no arguments" in broken["fake_args"] and "n" in broken["fake_args"]
+    assert "seed" in broken["fake_kw"]
+    assert "must be a class" in broken["fake_func"]
+    dup = [k for k in broken if k.startswith("pmc [")]
+    assert dup and "duplicate" in broken[dup[0]]
+    assert samplers.get("pmc").__name__ == "PMC"  # the first registration keeps the name
+    table = samplers.table()
+    assert "BROKEN" in table and "fake_good" in table and "A good fake sampler." in table
+    with pytest.raises(ValueError, match="broken"):
+        samplers.get("fake_import")
+
+
+def test_cli_survives_broken_plugins(fake_plugins, capsys):
+    assert cli.main(["samplers"]) == 0
+    out = capsys.readouterr().out
+    assert "fake_import" in out and "BROKEN" in out and "pmc" in out
+
+
+def test_unknown_name_lists_available():
+    with pytest.raises(ValueError, match=r"unknown sampler 'nope'; available: .*pmc"):
+        samplers.get("nope")
+    with pytest.raises(ValueError, match="string"):
+        samplers.get(3)
+
+
+def test_local_registration():
+    samplers.registry.register("local_good", Good)
+    try:
+        assert samplers.get("local_good") is Good
+    finally:
+        samplers.registry.unregister("local_good")
+    with pytest.raises(TypeError):
+        samplers.registry.register("local_bad", NeedsArgs)
+
+
+@pytest.mark.parametrize("obj", [NeedsArgs, NoKeywords, not_a_class, object(), type("X", (), {})])
+def test_validator_rejects(obj):
+    with pytest.raises(TypeError):
+        validate_sampler(obj)
+
+
+def test_validator_accepts_var_keywords():
+    class Kw:
+        def run(self, target, **kw):
+            return None
+
+    validate_sampler(Kw)
+    validate_sampler(Good)
+
+
+def test_listing_does_not_import_heavy_dependencies():
+    code = ("import sys, mrfpe.samplers as s; s.table(); heavy = ['emcee', 'nlopt', 'ot', "
+            "'cv2', 'skimage', 'dask', 'matplotlib', 'sklearn', 'arviz']; "
+            "print(','.join(m for m in heavy if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "", f"listing imported {out.stdout.strip()}"

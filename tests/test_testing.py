@@ -1,0 +1,182 @@
+"""Tests of mrfpe.testing: the analytic targets and that each check catches what it claims."""
+
+import time
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from mrfpe import testing as T
+from mrfpe.posterior import build, ess
+from mrfpe.samplers.base import Sampler, check_positive_int
+
+
+# -- analytic targets ------------------------------------------------------
+def test_gaussian_is_the_stated_gaussian():
+    t = T.CorrelatedGaussian()
+    rng = np.random.default_rng(0)
+    x = t.mean + rng.normal(scale=0.03, size=(20, 3))
+    ref = stats.multivariate_normal(t.mean, t.cov).logpdf(x)
+    lp = t.log_prob(x)
+    assert np.allclose(lp - lp[0], ref - ref[0])  # same density up to a constant
+    assert np.all(t.mean - 5 * t.sd > 0) and np.all(t.mean + 5 * t.sd < 1)  # truncation negligible
+    assert np.allclose(np.corrcoef(np.linalg.cholesky(t.cov) @ rng.normal(size=(3, 200_000))),
+                       t.corr, atol=0.01)
+    assert np.isneginf(t.log_prob([[1.2, 0.5, 0.5]]))[0]
+
+
+@pytest.mark.parametrize("kind", ["strided", "block"])
+@pytest.mark.parametrize("k", [1, 3, 7])
+def test_gaussian_partition_sums_to_full(kind, k):
+    t = T.CorrelatedGaussian()
+    parts = t.partition(k, kind)
+    assert len(parts) == k and np.isclose(sum(p.cost for p in parts), 1.0)
+    x = np.random.default_rng(1).random((15, 3))
+    assert np.allclose(sum(p.log_prob(x) for p in parts), t.log_prob(x))
+    with pytest.raises(ValueError):
+        t.partition(0)
+    with pytest.raises(ValueError):
+        t.partition(2, "diagonal")
+
+
+def test_residuals_give_the_log_density():
+    x = np.random.default_rng(2).random((10, 3)) * 0.4 + 0.3
+    for t in (T.CorrelatedGaussian(), T.CorrelatedGaussian(8)):
+        r = t.residuals(x)
+        lp = t.log_prob(x)
+        assert np.allclose(lp + 0.5 * np.sum(r**2, axis=1), (lp + 0.5 * np.sum(r**2, axis=1))[0])
+    tm = T.TwoModes()
+    y = x[:, :2]
+    r = tm.residuals(y)
+    assert np.allclose(tm.log_prob(y), tm.max_log_prob + 1 - 0.5 * np.sum(r**2, axis=1))
+
+
+def test_two_modes_and_mostly_minus_inf():
+    tm = T.TwoModes()
+    g = np.stack(np.meshgrid(np.linspace(0, 1, 401), np.linspace(0, 1, 401)), -1).reshape(-1, 2)
+    best = g[np.argmax(tm.log_prob(g))]
+    assert np.linalg.norm(best - tm.high) < 0.005
+    assert tm.log_prob(tm.low)[0] < tm.max_log_prob - 0.99
+    mm = T.MostlyMinusInf()
+    u = np.random.default_rng(3).random((100_000, 3))
+    frac = np.isfinite(mm.log_prob(u)).mean()
+    assert 0.002 < frac < 0.005
+    assert np.isfinite(mm.log_prob(mm.box.mean(axis=1)))[0]
+
+
+# -- samplers to test the checks with ----------------------------------------
+class GaussIS(Sampler):
+    """Importance sampling from a broad Gaussian, redrawn into the bounds (reference)."""
+
+    def __init__(self, n_samples: int = 20000, *, weighted: bool = True,
+                 ignore_seed: bool = False, leave_bounds: bool = False):
+        self.n_samples = check_positive_int("n_samples", n_samples)
+        for k, v in (("weighted", weighted), ("ignore_seed", ignore_seed),
+                     ("leave_bounds", leave_bounds)):
+            if not isinstance(v, bool):
+                raise ValueError(f"{k} must be a bool")
+        self.weighted, self.ignore_seed, self.leave_bounds = weighted, ignore_seed, leave_bounds
+
+    def run(self, target, *, seed=None, progress=False, callback=None):
+        t0 = time.perf_counter()
+        rng = np.random.default_rng(None if self.ignore_seed else seed)
+        b = np.asarray(target.bounds)
+        c, s = b.mean(1), (b[:, 1] - b[:, 0]) * 0.25
+        x = rng.normal(c, s, (self.n_samples, len(c)))
+        if not self.leave_bounds:
+            out = ~np.all((x >= b[:, 0]) & (x <= b[:, 1]), axis=1)
+            x = x[~out]
+        lq = -0.5 * np.sum(((x - c) / s) ** 2, 1)
+        lt = target.log_prob(x)
+        lw = np.where(np.isfinite(lt), lt - lq, -np.inf) if self.weighted else None
+        best = int(np.argmax(lt))
+        if callback:
+            callback(0, {"ess": ess(lw if lw is not None else np.zeros(len(x)))})
+        return build(x, lt, param_names=target.param_names, log_weight=lw,
+                     map_theta=x[best][None], map_log_target=[lt[best]], sampler="gaussis",
+                     config=self.get_config(), seed=seed, target=target,
+                     n_target_evals=len(x), wall_time_s=time.perf_counter() - t0)
+
+
+def _variant(**cfg):
+    return type("V", (GaussIS,), {"conformance": {"quick_config": cfg}})
+
+
+def test_reference_sampler_passes_everything():
+    report = T.check_sampler(GaussIS)
+    assert set(report) == set(T.CHECKS) and set(report.values()) == {"passed"}
+
+
+@pytest.mark.parametrize(("cfg", "check"), [
+    ({"weighted": False}, "gaussian_moments"),
+    ({"ignore_seed": True}, "reproducible"),
+    ({"leave_bounds": True}, "bounds"),
+])
+def test_checks_catch_broken_samplers(cfg, check):
+    with pytest.raises(AssertionError, match=f"check_{check} failed"):
+        T.run_check(_variant(**cfg), check)
+
+
+def test_config_check_catches_unvalidated_settings():
+    class Lax(GaussIS):
+        def __init__(self, n_samples: int = 20000, scale: float = 1.0):
+            super().__init__(n_samples)
+            self.scale = scale  # not validated
+
+    with pytest.raises(AssertionError, match=r"scale=.*accepted"):
+        T.check_config(Lax)
+
+    class Star(GaussIS):
+        def __init__(self, **kw):
+            super().__init__()
+
+    with pytest.raises(AssertionError, match=r"\*\*kwargs"):
+        T.check_config(Star)
+
+
+def test_interface_check_and_map_trace_check():
+    class NoRun:
+        pass
+
+    with pytest.raises(AssertionError, match="check_interface"):
+        T.check_interface(NoRun)
+
+    class BadMap(GaussIS):
+        def run(self, target, **kw):
+            post = super().run(target, **kw)
+            post["map_log_target"][:] = post["map_log_target"] + 1.0
+            return post
+
+    with pytest.raises(AssertionError, match="check_map_trace"):
+        T.check_map_trace(BadMap)
+
+
+def test_mostly_minus_inf_check_catches_weight_on_impossible_samples():
+    class Careless(GaussIS):
+        def run(self, target, **kw):
+            post = super().run(target, **kw)
+            post["log_weight"][:] = -np.log(post.sizes["sample"])
+            return post
+
+    with pytest.raises(AssertionError, match="carry weight"):
+        T.check_mostly_minus_inf(Careless)
+
+
+def test_declarations_skip_and_tune_checks():
+    cls = type("D", (GaussIS,), {"conformance": {
+        "gaussian_moments": False, "two_modes": {"tol": 0.2}}})
+    report = T.check_sampler(cls)
+    assert report["gaussian_moments"] == "skipped: declared"
+    assert report["two_modes"] == "passed"
+    bad = type("B", (GaussIS,), {"conformance": {"no_such_check": False}})
+    with pytest.raises(AssertionError, match="unknown checks"):
+        T.check_sampler(bad)
+    with pytest.raises(ValueError, match="unknown check"):
+        T.run_check(GaussIS, "nope")
+
+
+def test_check_sampler_reports_all_failures_at_once():
+    with pytest.raises(AssertionError) as info:
+        T.check_sampler(_variant(weighted=False, ignore_seed=True))
+    msg = str(info.value)
+    assert "check_gaussian_moments" in msg and "check_reproducible" in msg

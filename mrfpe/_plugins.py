@@ -138,7 +138,7 @@ class Registry:
             rows.append((info.name, info.package, info.version, desc))
         if not rows:
             return f"no {self.kind}s registered under {self.group!r}"
-        w = [max(len(r[i]) for r in rows + [("name", "package", "version", "")]) for i in range(3)]
+        w = [max(len(r[i]) for r in [*rows, ("name", "package", "version", "")]) for i in range(3)]
         head = f"{'name':<{w[0]}}  {'package':<{w[1]}}  {'version':<{w[2]}}  description"
         lines = [head, "-" * len(head)]
         lines += [f"{a:<{w[0]}}  {b:<{w[1]}}  {c:<{w[2]}}  {d}" for a, b, c, d in rows]

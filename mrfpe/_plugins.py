@@ -44,6 +44,19 @@ def first_doc_line(obj: Any) -> str:
     return next((line.strip() for line in doc.splitlines() if line.strip()), "")
 
 
+def check_no_arg_constructible(obj: Any, name: str) -> None:
+    """Raise TypeError unless every constructor parameter of class ``obj`` has a default."""
+    try:
+        init_sig = inspect.signature(obj.__init__)
+    except (TypeError, ValueError):  # pragma: no cover - builtins without signatures
+        return
+    required = [p.name for p in list(init_sig.parameters.values())[1:]
+                if p.default is p.empty and p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD)]
+    if required:
+        raise TypeError(f"{name}() must be constructible with no arguments; "
+                        f"parameters without defaults: {', '.join(required)}")
+
+
 class Registry:
     """Discover, validate and look up the plugins of one entry-point group.
 
@@ -117,8 +130,25 @@ class Registry:
         """The broken plugins, by name, each with its error."""
         return {k: v for k, v in self.entries().items() if not v.ok}
 
+    def names(self) -> list[str]:
+        """Names of the working plugins, sorted."""
+        return sorted(self.available())
+
+    def errors(self) -> dict[str, str]:
+        """Broken plugins: ``{name: reason}``."""
+        return {k: v.error or "" for k, v in self.broken().items()}
+
     def get(self, name: str) -> Any:
-        """The plugin object registered as ``name``."""
+        """The plugin object registered as ``name``.
+
+        Raises
+        ------
+        ValueError
+            If ``name`` is not a string, is unknown (the message lists the
+            available plugins) or is broken.
+        """
+        if not isinstance(name, str):
+            raise ValueError(f"{self.kind} name must be a string; got {name!r}")
         entries = self.entries()
         info = entries.get(name)
         if info is None:

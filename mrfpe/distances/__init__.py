@@ -22,27 +22,9 @@ from mrfpe.distances.registry import registry, validate_distance
 __all__ = ["available", "broken", "distance", "get", "registry", "table", "validate_distance"]
 
 
-def available() -> list[str]:
-    """Names of the working distances, sorted."""
-    return sorted(registry.available())
-
-
-def broken() -> dict[str, str]:
-    """Broken distance plugins: ``{name: reason}``."""
-    return {k: v.error or "" for k, v in registry.broken().items()}
-
-
-def get(name: str) -> Any:
-    """The distance class registered as ``name``.
-
-    Raises
-    ------
-    ValueError
-        If ``name`` is unknown (the message lists the available distances) or broken.
-    """
-    if not isinstance(name, str):
-        raise ValueError(f"distance name must be a string; got {name!r}")
-    return registry.get(name)
+available = registry.names  # names of the working distances, sorted
+broken = registry.errors  # broken distance plugins: {name: reason}
+get = registry.get  # the distance class registered as ``name`` (ValueError lists the others)
 
 
 def distance(name: str, a: Any, b: Any, **params: Any) -> float:

@@ -22,7 +22,7 @@ import inspect
 from collections.abc import Callable, Mapping
 from typing import Any
 
-from mrfpe._plugins import PluginInfo, Registry
+from mrfpe._plugins import PluginInfo, Registry, check_no_arg_constructible
 
 __all__ = ["DistanceRegistry", "describe", "registry", "validate_distance"]
 
@@ -49,16 +49,7 @@ def validate_distance(obj: Any) -> None:
         raise TypeError(f"{name}.symmetric must be a bool")
     if not isinstance(getattr(obj, "params", None), Mapping):
         raise TypeError(f"{name}.params must be a mapping of parameter names to defaults")
-    try:
-        init_sig = inspect.signature(obj.__init__)
-    except (TypeError, ValueError):  # pragma: no cover - builtins without signatures
-        init_sig = None
-    if init_sig is not None:
-        required = [p.name for p in list(init_sig.parameters.values())[1:]
-                    if p.default is p.empty and p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD)]
-        if required:
-            raise TypeError(f"{name}() must be constructible with no arguments; "
-                            f"parameters without defaults: {', '.join(required)}")
+    check_no_arg_constructible(obj, name)
     if not _own_attr(obj, "__call__"):
         raise TypeError(f"{name} must define __call__(a, b, **params)")
     sig = inspect.signature(obj.__call__)

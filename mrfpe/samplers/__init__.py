@@ -13,34 +13,14 @@ implement the interface or reuses a name is reported by :func:`broken` and in
 
 from __future__ import annotations
 
-from typing import Any
-
 from mrfpe.samplers.registry import registry, validate_sampler
 
 __all__ = ["available", "broken", "get", "registry", "table", "validate_sampler"]
 
 
-def available() -> list[str]:
-    """Names of the working samplers, sorted."""
-    return sorted(registry.available())
-
-
-def broken() -> dict[str, str]:
-    """Broken sampler plugins: ``{name: reason}``."""
-    return {k: v.error or "" for k, v in registry.broken().items()}
-
-
-def get(name: str) -> Any:
-    """The sampler class registered as ``name``.
-
-    Raises
-    ------
-    ValueError
-        If ``name`` is unknown (the message lists the available samplers) or broken.
-    """
-    if not isinstance(name, str):
-        raise ValueError(f"sampler name must be a string; got {name!r}")
-    return registry.get(name)
+available = registry.names  # names of the working samplers, sorted
+broken = registry.errors  # broken sampler plugins: {name: reason}
+get = registry.get  # the sampler class registered as ``name`` (ValueError lists the others)
 
 
 def table() -> str:

@@ -13,7 +13,7 @@ from __future__ import annotations
 import inspect
 from typing import Any
 
-from mrfpe._plugins import Registry
+from mrfpe._plugins import Registry, check_no_arg_constructible
 
 __all__ = ["registry", "validate_sampler"]
 
@@ -30,16 +30,7 @@ def validate_sampler(obj: Any) -> None:
     """
     if not inspect.isclass(obj):
         raise TypeError(f"a sampler must be a class; got {type(obj).__name__} {obj!r}")
-    try:
-        init_sig = inspect.signature(obj.__init__)
-    except (TypeError, ValueError):  # pragma: no cover - builtins without signatures
-        init_sig = None
-    if init_sig is not None:
-        required = [p.name for p in list(init_sig.parameters.values())[1:]
-                    if p.default is p.empty and p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD)]
-        if required:
-            raise TypeError(f"{obj.__name__}() must be constructible with no arguments; "
-                            f"parameters without defaults: {', '.join(required)}")
+    check_no_arg_constructible(obj, obj.__name__)
     run = getattr(obj, "run", None)
     if not callable(run):
         raise TypeError(f"{obj.__name__} has no callable 'run' method")

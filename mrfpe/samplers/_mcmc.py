@@ -1,4 +1,4 @@
-"""Start points for the chain samplers (mh, dw_q, dw_r, emcee).
+"""Chain-length checks and start points for the chain samplers (mh, dw_q, dw_r, emcee).
 
 Book-keeping (evaluation counts, MAP trace, progress, callback) is
 :class:`mrfpe.samplers._common.Run`; this module adds what only chains need.
@@ -11,7 +11,18 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["draw_in_support"]
+from mrfpe.samplers.base import check_positive_int
+
+__all__ = ["check_chain_length", "draw_in_support"]
+
+
+def check_chain_length(n_steps: Any, burn_in: Any, thin: Any) -> tuple[int, int, int]:
+    """Validate ``n_steps`` >= 1, 0 <= ``burn_in`` < ``n_steps`` and ``thin`` >= 1."""
+    n_steps = check_positive_int("n_steps", n_steps)
+    burn_in_ = check_positive_int("burn_in", burn_in, minimum=0)
+    if burn_in_ >= n_steps:
+        raise ValueError(f"burn_in must be < n_steps ({n_steps}); got {burn_in}")
+    return n_steps, burn_in_, check_positive_int("thin", thin)
 
 
 def draw_in_support(run: Any, target: Any, rng: np.random.Generator, n: int,

@@ -52,7 +52,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from mrfpe.samplers._common import Run, check_seed, check_target
-from mrfpe.samplers._mcmc import draw_in_support
+from mrfpe.samplers._mcmc import check_chain_length, draw_in_support
 from mrfpe.samplers.base import Callback, Sampler, check_choice, check_positive_int, check_range
 
 __all__ = ["QTypeDynamicWeighting", "RTypeDynamicWeighting", "dw_update"]
@@ -116,12 +116,8 @@ class _DynamicWeighting(Sampler):
     def _check_common(self, n_steps: int, n_chains: int, burn_in: int, thin: int,
                       proposal_sd: float, theta: float, delta: float,
                       initial_weight: str) -> None:
-        self.n_steps = check_positive_int("n_steps", n_steps)
+        self.n_steps, self.burn_in, self.thin = check_chain_length(n_steps, burn_in, thin)
         self.n_chains = check_positive_int("n_chains", n_chains)
-        self.burn_in = check_positive_int("burn_in", burn_in, minimum=0)
-        if self.burn_in >= self.n_steps:
-            raise ValueError(f"burn_in must be < n_steps ({self.n_steps}); got {burn_in}")
-        self.thin = check_positive_int("thin", thin)
         self.proposal_sd = check_range("proposal_sd", proposal_sd, 0.0, np.inf,
                                        low_open=True, high_open=True)
         self.theta = check_range("theta", theta, 0.0, np.inf, high_open=True)

@@ -20,7 +20,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from mrfpe.samplers._common import Run, check_seed, check_target
-from mrfpe.samplers._mcmc import draw_in_support
+from mrfpe.samplers._mcmc import check_chain_length, draw_in_support
 from mrfpe.samplers.base import Callback, Sampler, check_positive_int, check_range
 
 __all__ = ["EmceeEnsemble"]
@@ -52,11 +52,7 @@ class EmceeEnsemble(Sampler):
         if self.n_walkers % 2:
             raise ValueError(f"n_walkers must be even (emcee splits the ensemble in two); "
                              f"got {n_walkers}")
-        self.n_steps = check_positive_int("n_steps", n_steps)
-        self.burn_in = check_positive_int("burn_in", burn_in, minimum=0)
-        if self.burn_in >= self.n_steps:
-            raise ValueError(f"burn_in must be < n_steps ({self.n_steps}); got {burn_in}")
-        self.thin = check_positive_int("thin", thin)
+        self.n_steps, self.burn_in, self.thin = check_chain_length(n_steps, burn_in, thin)
         self.stretch_scale = check_range("stretch_scale", stretch_scale, 1.0, np.inf,
                                          low_open=True, high_open=True)
 

@@ -14,8 +14,8 @@ find its global maximiser with :func:`mrfpe.targets.maximise`, run PMC
 
 Usage::
 
-    python benchmarks/bench_pmc.py --scenes 5 --variants mixture thesis2 thesis1
-    python benchmarks/bench_pmc.py --scenes 1 --variants mixture --power 0.01 0.02 0.05
+    python -m benchmarks.bench_pmc --scenes 5 --variants mixture thesis2 thesis1
+    python -m benchmarks.bench_pmc --scenes 1 --variants mixture --power 0.01 0.02 0.05
 
 Maximisers are cached in ``--cache`` (default: a directory under the system's temp
 dir; they cost ~1 min per scene).
@@ -26,42 +26,13 @@ from __future__ import annotations
 import argparse
 import json
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 
+from benchmarks._common import cached_maximiser, ward_scene_target
+
 THESIS_TABLE_7_1 = 0.1043  # Ward, 20 labels, 1000 samples, MAP dist after 20 iterations
-
-
-def scene_and_target(i: int, shape: tuple[int, int], n_labels: int):
-    import mrfpe
-    from mrfpe.brdf import get as brdf
-    from mrfpe.synthetic import make_scene
-
-    u = np.random.default_rng(1000 + i).uniform(0.05, 0.95, 3)
-    theta = np.asarray(brdf("ward").to_natural(u)).reshape(-1)
-    scene = make_scene(brdf="ward", theta=theta, shape=shape, n_labels=n_labels, seed=i)
-    return u, mrfpe.targets.get("pls", scene)
-
-
-def maximiser(i: int, target, cache: Path, tag: str) -> tuple[np.ndarray, float, float]:
-    import mrfpe
-
-    path = cache / f"max_{tag}_{i}.json"
-    if path.exists():
-        rec = json.loads(path.read_text())
-        return np.array(rec["x"]), rec["f"], rec["time"]
-    t0 = time.perf_counter()
-    try:
-        x, f = mrfpe.targets.maximise(target)
-    except ValueError as exc:  # the default polish failed: gradient-based refinement instead
-        print(f"  maximise failed ({exc}); retrying with method='l-bfgs-b'", flush=True)
-        x, f = mrfpe.targets.maximise(target, method="l-bfgs-b")
-    rec = {"x": np.asarray(x).tolist(), "f": float(f), "time": time.perf_counter() - t0}
-    cache.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(rec))
-    return np.asarray(x), float(f), rec["time"]
 
 
 def _power(text: str) -> float | str:
@@ -91,8 +62,8 @@ def main(argv=None) -> int:
     tag = f"{args.shape[0]}x{args.shape[1]}_{args.n_labels}"
     rows = []
     for i in range(args.first, args.first + args.scenes):
-        u, target = scene_and_target(i, tuple(args.shape), args.n_labels)
-        xm, fm, tm = maximiser(i, target, args.cache, tag)
+        u, target = ward_scene_target(i, tuple(args.shape), args.n_labels)
+        xm, fm, tm = cached_maximiser(i, target, tag, args.cache)
         print(f"scene {i}: truth {u.round(3)}  PL maximiser {xm.round(3)} (log PL {fm:.6g}, "
               f"|max - truth| {np.linalg.norm(xm - u):.3f}, {tm:.0f} s)", flush=True)
         for variant in args.variants:

@@ -16,8 +16,8 @@ script reports
 
 Usage::
 
-    python benchmarks/bench_samplers.py --scenes 2
-    python benchmarks/bench_samplers.py --scenes 1 --shape 40 40 --samplers dw_r emcee
+    python -m benchmarks.bench_samplers --scenes 2
+    python -m benchmarks.bench_samplers --scenes 1 --shape 40 40 --samplers dw_r emcee
 
 The first ``log_prob`` calls include numba compilation: a warm-up evaluation
 runs before the timed runs.
@@ -32,32 +32,16 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks._common import (
+    append_results,
+    cached_maximiser,
+    command_line,
+    machine,
+    markdown_table,
+    ward_scene_target,
+)
+
 SAMPLERS = ("pmc", "emcee", "dw_r", "lm_multiseed")
-
-
-def scene_and_target(i: int, shape: tuple[int, int], n_labels: int):
-    """Scene ``i``: random true parameters (unit cube) and its ``pls`` target."""
-    import mrfpe
-    from mrfpe.brdf import get as brdf
-    from mrfpe.synthetic import make_scene
-
-    u = np.random.default_rng(1000 + i).uniform(0.05, 0.95, 3)
-    theta = np.asarray(brdf("ward").to_natural(u)).reshape(-1)
-    scene = make_scene(brdf="ward", theta=theta, shape=shape, n_labels=n_labels, seed=i)
-    return u, mrfpe.targets.get("pls", scene)
-
-
-def maximiser(i: int, target, cache: Path, tag: str) -> np.ndarray:
-    """The target's global maximiser (dense grid + local search), cached on disk."""
-    import mrfpe
-
-    path = cache / f"max_{tag}_{i}.json"
-    if path.exists():
-        return np.array(json.loads(path.read_text())["x"])
-    x, f = mrfpe.targets.maximise(target)
-    cache.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps({"x": np.asarray(x).tolist(), "f": float(f)}))
-    return np.asarray(x)
 
 
 def first_within(trace: list[tuple[float, float, np.ndarray]], point: np.ndarray,
@@ -85,6 +69,79 @@ def run_one(name: str, target, seed: int, config: dict) -> tuple[list, object]:
     return trace, post
 
 
+def run(samplers: list[str], scenes: range, shape: tuple[int, int], n_labels: int,
+        tol: float = 0.05, seed: int = 0, configs: dict | None = None,
+        out: Path | None = None) -> tuple[list[dict], list[str]]:
+    """Run every sampler on every scene; the rows and a markdown body with ratios to PMC."""
+    configs = configs or {}
+    tag = f"{shape[0]}x{shape[1]}_{n_labels}"
+    rows = []
+    for i in scenes:
+        u, target = ward_scene_target(i, shape, n_labels)
+        target.log_prob(np.full((1, 3), 0.5))  # compile the kernels outside the timings
+        xm = cached_maximiser(i, target, tag)[0]
+        print(f"scene {i}: truth {u.round(3)}  PL maximiser {xm.round(3)} "
+              f"(|max - truth| {np.linalg.norm(xm - u):.3f})", flush=True)
+        for name in samplers:
+            trace, post = run_one(name, target, seed, configs.get(name, {}))
+            m = post["map_theta"].values[-1]
+            e_true, s_true = first_within(trace, u, tol)
+            e_max, s_max = first_within(trace, xm, tol)
+            row = {"scene": i, "sampler": name, "evals@tol": e_true, "s@tol": s_true,
+                   "evals@tol_max": e_max, "s@tol_max": s_max,
+                   "d_true": float(np.linalg.norm(m - u)), "d_max": float(np.linalg.norm(m - xm)),
+                   "d_max_true": float(np.linalg.norm(xm - u)),
+                   "evals": float(post.attrs["n_target_evals"]),
+                   "time_s": float(post.attrs["wall_time_s"])}
+            rows.append(row)
+            print("  " + "  ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}"
+                                   for k, v in row.items() if k != "scene"), flush=True)
+            if out:
+                with out.open("a") as f:
+                    f.write(json.dumps(row) + "\n")
+    return rows, summary(rows, samplers, tol, shape, n_labels)
+
+
+def summary(rows: list[dict], samplers: list[str], tol: float, shape: tuple[int, int],
+            n_labels: int) -> list[str]:
+    """Markdown: per sampler, means over scenes, and evals / seconds as ratios to ``pmc``."""
+    def mean(sel: list[dict], key: str) -> float:
+        v = np.array([r[key] for r in sel], dtype=float)
+        return float(np.nanmean(v)) if np.isfinite(v).any() else np.nan
+
+    stats = {}
+    for name in samplers:
+        sel = [r for r in rows if r["sampler"] == name]
+        stats[name] = {k: mean(sel, k) for k in ("evals@tol", "s@tol", "evals@tol_max",
+                                                 "s@tol_max", "d_true", "d_max", "evals",
+                                                 "time_s")}
+        stats[name]["hit"] = sum(np.isfinite(r["evals@tol"]) for r in sel)
+        stats[name]["hit_max"] = sum(np.isfinite(r["evals@tol_max"]) for r in sel)
+    ref = stats.get("pmc")
+
+    def ratio(st: dict, k: str) -> float:
+        return st[k] / ref[k] if ref and np.isfinite(ref[k]) and ref[k] else np.nan
+
+    table_rows = []
+    for name, st in stats.items():
+        table_rows.append([name, f"{st['hit']}/{len(rows) // len(samplers)}", st["evals@tol"],
+                           st["s@tol"], ratio(st, "evals@tol"), ratio(st, "s@tol"),
+                           f"{st['hit_max']}", st["evals@tol_max"], ratio(st, "evals@tol_max"),
+                           st["d_true"], st["d_max"], st["evals"], st["time_s"]])
+    n_scenes = len(rows) // max(1, len(samplers))
+    d_mt = float(np.mean([r["d_max_true"] for r in rows])) if rows else np.nan
+    return [
+        f"Ward `pls`, {shape[0]}x{shape[1]}, {n_labels} labels, {n_scenes} scene(s), each "
+        f"sampler at its default (thesis-sized) budget. `@truth`: first step whose MAP is "
+        f"within {tol} (unit cube) of the true parameters; `@max`: of the PL maximiser "
+        f"(which lies {d_mt:.3f} from the truth on average). Evaluations are "
+        f"full-lattice equivalents; ratios are to `pmc` in the same run (means over the "
+        f"scenes that reached the tolerance; `-` where none did).\n",
+        markdown_table(["sampler", "hit", "evals@truth", "s@truth", "evals ÷ pmc",
+                        "s ÷ pmc", "hit max", "evals@max", "evals@max ÷ pmc", "final d_true",
+                        "final d_max", "evals", "time s"], table_rows)]
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--scenes", type=int, default=2)
@@ -95,9 +152,9 @@ def main(argv=None) -> int:
     p.add_argument("--n-labels", type=int, default=20)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--set", nargs="*", default=[], metavar="SAMPLER.KEY=VALUE",
-                   help="override a sampler setting, e.g. dw_r.n_steps=5000")
-    p.add_argument("--cache", type=Path, default=Path("benchmarks/.cache"))
+                   help="sampler setting, value as JSON, e.g. dw_r.n_steps=5000")
     p.add_argument("--out", type=Path, default=None, help="JSON-lines results file")
+    p.add_argument("--write", action="store_true", help="append the summary to RESULTS.md")
     args = p.parse_args(argv)
 
     configs: dict[str, dict] = {s: {} for s in args.samplers}
@@ -108,48 +165,13 @@ def main(argv=None) -> int:
             configs[sampler][setting] = json.loads(raw)
         except json.JSONDecodeError:
             configs[sampler][setting] = raw
-
-    tag = f"{args.shape[0]}x{args.shape[1]}_{args.n_labels}"
-    rows = []
-    for i in range(args.first, args.first + args.scenes):
-        u, target = scene_and_target(i, tuple(args.shape), args.n_labels)
-        target.log_prob(np.full((1, 3), 0.5))  # compile the kernels outside the timings
-        xm = maximiser(i, target, args.cache, tag)
-        print(f"scene {i}: truth {u.round(3)}  PL maximiser {xm.round(3)} "
-              f"(|max - truth| {np.linalg.norm(xm - u):.3f})", flush=True)
-        for name in args.samplers:
-            trace, post = run_one(name, target, args.seed, configs[name])
-            m = post["map_theta"].values[-1]
-            e_true, s_true = first_within(trace, u, args.tol)
-            e_max, s_max = first_within(trace, xm, args.tol)
-            row = {"scene": i, "sampler": name, "evals@tol": e_true, "s@tol": s_true,
-                   "evals@tol_max": e_max, "s@tol_max": s_max,
-                   "d_true": float(np.linalg.norm(m - u)), "d_max": float(np.linalg.norm(m - xm)),
-                   "evals": float(post.attrs["n_target_evals"]),
-                   "time_s": float(post.attrs["wall_time_s"])}
-            rows.append(row)
-            print("  " + "  ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}"
-                                   for k, v in row.items() if k != "scene"), flush=True)
-            if args.out:
-                with args.out.open("a") as f:
-                    f.write(json.dumps(row) + "\n")
-
-    print(f"\nsummary over {args.scenes} scene(s), tol {args.tol} (means over the scenes that "
-          "reached it; 'hit' = how many did):")
-    print(f"{'sampler':<13} {'hit':>4} {'evals@tol':>10} {'s@tol':>7} {'hit_max':>7} "
-          f"{'evals@max':>10} {'d_true':>7} {'d_max':>7} {'evals':>8} {'time s':>7}")
-    for name in args.samplers:
-        sel = [r for r in rows if r["sampler"] == name]
-
-        def mean(key: str, sel=sel) -> float:
-            v = np.array([r[key] for r in sel], dtype=float)
-            return float(np.nanmean(v)) if np.isfinite(v).any() else np.nan
-
-        hit = sum(np.isfinite(r["evals@tol"]) for r in sel)
-        hit_max = sum(np.isfinite(r["evals@tol_max"]) for r in sel)
-        print(f"{name:<13} {hit:>4} {mean('evals@tol'):>10.0f} {mean('s@tol'):>7.1f} "
-              f"{hit_max:>7} {mean('evals@tol_max'):>10.0f} {mean('d_true'):>7.4f} "
-              f"{mean('d_max'):>7.4f} {mean('evals'):>8.0f} {mean('time_s'):>7.1f}")
+    info = machine()
+    _, body = run(args.samplers, range(args.first, args.first + args.scenes),
+                  tuple(args.shape), args.n_labels, args.tol, args.seed, configs, args.out)
+    print("\n".join(body))
+    if args.write:
+        append_results("bench_samplers: sampler efficiency",
+                       command_line(argv, "benchmarks.bench_samplers"), info, body)
     return 0
 
 

@@ -43,9 +43,9 @@ covers ``max_disparity`` (32, 48) its unmatched band widens (SGBM: 0.258 and
 
 Usage::
 
-    python benchmarks/bench_stereo.py                 # table + energy plot + RESULTS.md
-    python benchmarks/bench_stereo.py --no-append --levels quarter
-    python benchmarks/bench_stereo.py --sensitivity --no-append
+    python -m benchmarks.bench_stereo                 # table + energy plot + RESULTS.md
+    python -m benchmarks.bench_stereo --no-append --levels quarter
+    python -m benchmarks.bench_stereo --sensitivity --no-append
 """
 
 from __future__ import annotations
@@ -56,7 +56,8 @@ from pathlib import Path
 
 import numpy as np
 
-HERE = Path(__file__).resolve().parent
+from benchmarks._common import HERE, append_results, command_line, machine
+
 LEVELS = {"quarter": (4, 20), "half": (2, 40)}
 
 
@@ -248,15 +249,21 @@ def main(argv=None) -> int:
     p.add_argument("--sensitivity", action="store_true",
                    help="measure the accuracy stereo needs for BRDF estimation instead")
     args = p.parse_args(argv)
+    info = machine()
     if args.sensitivity:
-        lines = sensitivity()
-        if not args.no_append:
-            with open(HERE / "RESULTS.md", "a") as fh:
-                fh.write("\n## Stereo accuracy needed for BRDF estimation "
-                         "(benchmarks/bench_stereo.py --sensitivity)\n\n")
-                fh.write("\n".join(f"- {x}" for x in lines) + "\n")
-        return 0
+        title = "Stereo accuracy needed for BRDF estimation"
+        body = [f"- {x}" for x in sensitivity()]
+    else:
+        title = "Stereo: Middlebury motorcycle, bad-1px"
+        body = run(args.levels, args.plot)
+    print("\n".join(body))
+    if not args.no_append:
+        append_results(title, command_line(argv, "benchmarks.bench_stereo"), info, body)
+    return 0
 
+
+def run(levels: list[str], plot: str | Path) -> list[str]:
+    """mrfpe's BP (both schedules) and OpenCV on the motorcycle pair; markdown body lines."""
     from mrfpe.stereo import disparity
 
     # warm the numba kernels so that timings are run times, not compile times
@@ -265,7 +272,7 @@ def main(argv=None) -> int:
     disparity(z, z, 3, iterations=1, schedule="parallel")
 
     rows, energies, estimates = [], {}, {}
-    for level in args.levels:
+    for level in levels:
         scale, dmax = LEVELS[level]
         left, right, gt = load(scale)
         g = gt[np.isfinite(gt)]
@@ -288,7 +295,7 @@ def main(argv=None) -> int:
                   + (f"  (over the pixels it matches: {matched})" if matched else ""))
 
     checks = []
-    for level in args.levels:
+    for level in levels:
         ea, ep = energies[(level, "mrfpe accelerated")], energies[(level, "mrfpe parallel")]
         reach = next((t for t in range(len(ea)) if ea[t] <= ep[10]), None)
         checks.append(f"{level}: accelerated reaches the parallel schedule's 10-iteration energy "
@@ -306,9 +313,9 @@ def main(argv=None) -> int:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, len(args.levels), figsize=(5 * len(args.levels), 3.6),
+    fig, axes = plt.subplots(1, len(levels), figsize=(5 * len(levels), 3.6),
                              squeeze=False)
-    for ax, level in zip(axes[0], args.levels, strict=True):
+    for ax, level in zip(axes[0], levels, strict=True):
         for name, style in (("mrfpe accelerated", "o-"), ("mrfpe parallel", "s--")):
             e = energies[(level, name)]
             ax.plot(np.arange(len(e)), e, style, label=name.split()[1], ms=4)
@@ -317,25 +324,17 @@ def main(argv=None) -> int:
         ax.set_ylabel("MRF energy of the MAP labelling")
         ax.legend()
     fig.tight_layout()
-    fig.savefig(args.plot, dpi=120)
-    print(f"energy plot -> {args.plot}")
+    fig.savefig(plot, dpi=120)
+    print(f"energy plot -> {plot}")
 
     table = ["| resolution | method | bad-1px | bad-1px over matched pixels | time (s) |",
              "|---|---|---|---|---|"]
     table += [f"| {lv} | {nm} | {b:.4f} | {m or 'all matched'} | {s:.2f} |"
               for lv, nm, b, m, s in rows]
-    print("\n".join(table))
-    if not args.no_append:
-        with open(HERE / "RESULTS.md", "a") as fh:
-            fh.write("\n## Stereo: Middlebury motorcycle, bad-1px (benchmarks/bench_stereo.py)\n\n")
-            fh.write(f"{time.strftime('%Y-%m-%d')}; mrfpe defaults, 10 iterations; quarter = "
-                     "185x125 (GT 1.8-15.0 px, max_disparity 20), half = 370x250 (GT 3.6-30.0 "
-                     "px, max_disparity 40); OpenCV numDisparities 16 / 32. Unmatched pixels "
-                     "count as bad.\n\n")
-            fh.write("\n".join(table) + "\n\n")
-            fh.write("\n".join(f"- {c}" for c in checks) + "\n")
-            fh.write(f"- energy against iteration: `{Path(args.plot).name}`\n")
-    return 0
+    return ["mrfpe defaults, 10 iterations; quarter = 185x125 (GT 1.8-15.0 px, max_disparity "
+            "20), half = 370x250 (GT 3.6-30.0 px, max_disparity 40); OpenCV numDisparities 16 "
+            "/ 32. Unmatched pixels count as bad.\n", *table, "",
+            *(f"- {c}" for c in checks), f"- energy against iteration: `{Path(plot).name}`"]
 
 
 if __name__ == "__main__":

@@ -408,25 +408,61 @@ def _netcdf_attr(value: Any) -> Any:
     return json.dumps(value, default=str, sort_keys=True)
 
 
-def _execute(trial: TrialFn, study_name: str, config: dict, repeat: int, seed: int) -> xr.Dataset:
-    """Run one trial (in-process or on a dask worker) and stamp its provenance."""
-    t0 = time.perf_counter()
-    ds = trial(copy.deepcopy(config), repeat, seed)
-    wall = time.perf_counter() - t0
+def _execute(trial: TrialFn, study_name: str, config: dict, repeat: int, seed: int,
+             numba_threads: int | None = None) -> xr.Dataset:
+    """Run one trial (in-process or on a dask worker) and stamp its provenance.
+
+    ``numba_threads`` caps the kernels' threads for this trial (restored after):
+    on a cluster, the host's cores divided among the tasks it runs at once.
+    """
+    import numba
+
+    before = numba.get_num_threads()
+    if numba_threads is not None:
+        numba.set_num_threads(max(1, min(int(numba_threads), numba.config.NUMBA_NUM_THREADS)))
+    try:
+        t0 = time.perf_counter()
+        ds = trial(copy.deepcopy(config), repeat, seed)
+        wall = time.perf_counter() - t0
+        used = numba.get_num_threads()
+    finally:
+        numba.set_num_threads(before)
     if not isinstance(ds, xr.Dataset):
         raise TypeError(f"study {study_name!r}: trial must return an xarray.Dataset, "
                         f"got {type(ds).__name__}")
     ds = ds.load()
     ds.attrs.update({"trial_wall_time_s": wall, "host": socket.gethostname(),
-                     "pid": os.getpid()})
+                     "pid": os.getpid(), "numba_threads": used})
     return ds
 
 
-def _execute_pickled(blob: bytes, study_name: str, config: dict, repeat: int,
-                     seed: int) -> xr.Dataset:
+def _execute_pickled(blob: bytes, study_name: str, config: dict, repeat: int, seed: int,
+                     threads_by_host: Mapping[str, int] | None = None) -> xr.Dataset:
     import cloudpickle
 
-    return _execute(cloudpickle.loads(blob), study_name, config, repeat, seed)
+    threads = None
+    if threads_by_host:
+        from distributed import get_worker
+
+        threads = threads_by_host.get(get_worker().address.rsplit(":", 1)[0])
+    return _execute(cloudpickle.loads(blob), study_name, config, repeat, seed, threads)
+
+
+def _threads_by_host(client: Any) -> dict[str, int]:
+    """Kernel threads per task on each host: its cores over the task slots it runs.
+
+    Two workers of one thread each on a two-core machine give one numba thread
+    per trial, not two (which would run four busy threads on two cores).
+    """
+    workers = client.scheduler_info(n_workers=-1)["workers"]
+    cores = client.run(os.cpu_count)
+    slots: dict[str, int] = {}
+    host_cores: dict[str, int] = {}
+    for address, info in workers.items():
+        host = address.rsplit(":", 1)[0]
+        slots[host] = slots.get(host, 0) + int(info.get("nthreads", 1))
+        host_cores[host] = int(cores.get(address) or 1)
+    return {h: max(1, host_cores[h] // max(1, n)) for h, n in slots.items()}
 
 
 def _write(ds: xr.Dataset, path: Path) -> None:
@@ -613,11 +649,12 @@ def _run_dask(study: Study, pending: list[Task], address: str,
         if by_value:
             cloudpickle.unregister_pickle_by_value(module)
     with Client(address) as client:
+        threads = _threads_by_host(client)
         futures = {}
         for task in pending:
             key = f"{study.name}-{task.stem}-{task.hash}-{uuid.uuid4().hex[:8]}"
             fut = client.submit(_execute_pickled, blob, study.name, task.config, task.repeat,
-                                task.seed, pure=False, key=key)
+                                task.seed, threads, pure=False, key=key)
             futures[fut] = task
         try:
             for fut in as_completed(list(futures)):

@@ -318,6 +318,8 @@ def test_dask_scheduler_matches_in_process(cluster, tmp_path, user_study, capsys
         b = xr.load_dataset(remote / "trials" / name)
         np.testing.assert_array_equal(a["error"].values, b["error"].values)
         assert a.attrs["seed"] == b.attrs["seed"]
+        # two one-thread workers share this machine's cores: no oversubscription
+        assert b.attrs["numba_threads"] == max(1, (os.cpu_count() or 1) // 2)
         pids.add(b.attrs["pid"])
     assert os.getpid() not in pids  # computed on the workers
     # a study loaded from a file (not importable on the workers) is shipped by value

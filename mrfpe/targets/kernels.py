@@ -45,13 +45,17 @@ the number of threads.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+import numba
 import numpy as np
 from llvmlite import ir
 from numba import njit, prange, types
 from numba.extending import intrinsic, overload
 
-__all__ = ["BLOCK", "N_FEATURES", "block_size", "fexp", "flog", "pl_terms", "pl_terms_labels",
-           "vexp", "vexp32", "vlog", "vlog32"]
+__all__ = ["BLOCK", "MIN_EVALS_PER_THREAD", "N_FEATURES", "block_size", "fexp", "flog",
+           "pl_terms", "pl_terms_labels", "thread_budget", "vexp", "vexp32", "vlog", "vlog32"]
 
 #: Largest number of particles per block (the SIMD dimension of the kernel).
 BLOCK = 64
@@ -478,3 +482,33 @@ def block_size(n: int) -> int:
     n_blocks = -(-max(int(n), 1) // BLOCK)
     per = -(-max(int(n), 1) // n_blocks)
     return int(-(-per // 8) * 8)
+
+
+#: Smallest work (BRDF evaluations) that earns a thread of its own. A parallel region
+#: costs a fork/join and, on a loaded machine, a wait for a descheduled thread (up
+#: to a time slice); measured on two cores with both busy elsewhere, a single
+#: particle on a 10x10 scene (12k evaluations) took 0.1 ms on one thread and 8 ms
+#: on two, while from about 2e5 evaluations per thread up two threads win or tie
+#: (``python -m benchmarks`` reports the single-particle times).
+MIN_EVALS_PER_THREAD = 200_000
+
+
+@contextmanager
+def thread_budget(n_evals: int) -> Iterator[int]:
+    """Run the enclosed kernel call on ``min(threads, n_evals // MIN_EVALS_PER_THREAD)`` threads.
+
+    Never more than numba's current setting (``NUMBA_NUM_THREADS`` or
+    :func:`numba.set_num_threads`, which the caller may have lowered), never fewer
+    than one; the previous setting is restored on exit. Results do not depend on
+    the thread count (the kernels' chunk sums are added in a fixed order).
+    """
+    have = numba.get_num_threads()
+    want = max(1, min(have, int(n_evals) // MIN_EVALS_PER_THREAD))
+    if want == have:
+        yield have
+        return
+    numba.set_num_threads(want)
+    try:
+        yield want
+    finally:
+        numba.set_num_threads(have)

@@ -278,10 +278,11 @@ class BRDFTarget(Target):
         args = (t.slot_ptr, t.slot_y, t.slot_w, t.slot_nvar, t.fix_feat, t.var_ptr, t.var_feat,
                 self._unary_e, self._obs, ft(1.0 / self.sigma_b), self._chunks, ft(self._a),
                 ft(self._b), self._b != 0, out_chunk, out_node, per_node)
-        if labels_simd:
-            kernels.pl_terms_labels(coef_t, full, *args)
-        else:
-            kernels.pl_terms(coef_t, bl, full, *args)
+        with kernels.thread_budget(N * t.brdf_evals_per_particle):
+            if labels_simd:
+                kernels.pl_terms_labels(coef_t, full, *args)
+            else:
+                kernels.pl_terms(coef_t, bl, full, *args)
         if per_node:
             res = out_node[:, :N].T + self._const[None, :]
             res[bad] = -np.inf

@@ -302,6 +302,18 @@ def test_batch_invariance(tiny):
     np.testing.assert_allclose(t.log_prob(x[:33]), whole[:33], rtol=1e-13)
 
 
+def test_thread_count_does_not_change_values(tiny, monkeypatch):
+    """The per-call thread budget changes speed, never the numbers."""
+    from mrfpe.targets import kernels
+
+    t = get("pls", tiny)
+    x = np.random.default_rng(7).random((70, 3))
+    default = t.log_prob(x)
+    monkeypatch.setattr(kernels, "MIN_EVALS_PER_THREAD", 1)  # every call on all threads
+    np.testing.assert_array_equal(t.log_prob(x), default)
+    np.testing.assert_array_equal(t.log_prob(x[:3]), default[:3])
+
+
 CASES = [
     ("ward", [0.7, 0.4, 0.45], "smooth"),
     ("ward", [0.3, 0.6, 0.1], "smooth"),

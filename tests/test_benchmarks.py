@@ -1,0 +1,29 @@
+"""``python -m benchmarks --quick`` runs every suite end to end (numbers not asserted)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.mark.slow
+def test_benchmark_runner_quick(tmp_path):
+    before = (ROOT / "benchmarks" / "RESULTS.md").read_bytes()
+    proc = subprocess.run([sys.executable, "-m", "benchmarks", "--quick", "--no-write"],
+                          cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    out = proc.stdout
+    for heading in ("### Targets and PMC", "### Sampler efficiency", "### Stereo"):
+        assert heading in out
+    assert "| ward | float64 | 10 |" in out  # a targets row with every column filled
+    row = next(line for line in out.splitlines() if line.startswith("| ward | float64 | 10 |"))
+    cells = [c.strip() for c in row.split("|")[1:-1]]
+    assert len(cells) >= 20 and "-" not in cells
+    for sampler in ("pmc", "emcee", "dw_r", "lm_multiseed"):
+        assert f"| {sampler} |" in out
+    assert (ROOT / "benchmarks" / "RESULTS.md").read_bytes() == before  # --no-write

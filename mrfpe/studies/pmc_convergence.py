@@ -22,12 +22,24 @@ can rise between iterations. Weight variance is the population variance of the
 normalised weights of the iteration's set (``var`` columns; for PMC (II) these
 are the 1/G weights of 6.6.2 that represent the uniform distribution).
 
-Full run: about 22 h on two cores. That is 800 scenes (2 models × 4 label
-counts × 100) × (PMC with 1000+125+64 particles × 20 iterations, two variants,
-plus a maximiser) at 100×100 pixels, measured at 80 s per 20-label scene (shared
-2-core machine, pseudolikelihood kernel of Nov 2026: maximiser 25 s, PMC (II)
-33 s, mixture PMC 18 s); time grows about linearly with the labels. The
-20-label column alone (``--set n_labels=20``) takes about 4.5 h.
+Full run: about 20 h on two cores in float32 (the default). That is 800 scenes
+(2 models × 4 label counts × 100) × (PMC with 1000+125+64 particles × 20
+iterations, two variants, plus a maximiser) at 100×100 pixels; measured on a
+2-core Intel Xeon (Nov 2026): the 20-label Ward column (``--set n_labels=20
+--set 'brdf=["ward"]'``, 100 trials) took 86 min, about 40-50 s per scene
+(maximiser ~20 s, PMC (II) 15 s, mixture PMC 10 s); time grows about linearly
+with the labels (Ward: 6 h for all four columns), and Phong's scenes cost
+about twice Ward's. float64
+(``--set 'target_options={"dtype": "float64"}'``) takes about 2.5× as long.
+The result of that 20-label run is in ``docs/results/pmc_convergence_ward20``.
+
+Precision: the target is built in float32 by default. PMC needs log-target
+differences to a fraction of a nat; float32 per-node terms (summed in
+float64) keep ``log_prob`` within 2e-6 relative, a few 1e-3 nats at a 100×100
+lattice's values, with the same softened weights to 1e-4 in total variation
+(``tests/targets/test_pseudolikelihood.py::test_float32_accuracy``); on one
+20-label scene with the same seed, PMC (II) returned the same MAP in float32
+and float64.
 """
 
 from __future__ import annotations
@@ -150,8 +162,8 @@ def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
     sections.insert(2, "## Final iteration, all variants\n\n" + summary)
     for brdf in config["brdf"]:
         for variant in variants:
-            fig, axes = new_figure(1, len(config["n_labels"]),
-                                   size=(3.2 * len(config["n_labels"]), 3.2), sharey=True)
+            width = max(4.8, 3.2 * len(config["n_labels"]))  # room for the title
+            fig, axes = new_figure(1, len(config["n_labels"]), size=(width, 3.4), sharey=True)
             for ax, labels in zip(axes[0], config["n_labels"]):
                 group = cells.get((brdf, labels))
                 if not group:
@@ -185,7 +197,8 @@ STUDY = Study(
         "surfaces": dict(DEFAULT_SURFACES),
         "n_samples": [1000, 125, 64], "n_iterations": 20,
         "variants": ["thesis2", "mixture"], "pmc_options": {},
-        "shape": [100, 100], "noise": 0.0, "target": "pls", "target_options": {},
+        "shape": [100, 100], "noise": 0.0, "target": "pls",
+        "target_options": {"dtype": "float32"},
         "truth_range": [0.1, 0.9], "maximiser_grid": 20,
     },
     quick={"n_trials": 2, "n_labels": [10], "n_samples": [64, 27], "n_iterations": 5,

@@ -12,12 +12,12 @@ distance to the truth; this module finds that maximiser.
 
    * ``"pattern"`` (default): pattern search -- every iteration evaluates all
      starts' ``3^d - 1`` neighbours on the step's grid (``2 d`` axis neighbours
-     for ``d > 4``) in *one* batched call, moves each start to
-     its best neighbour if it improves and otherwise halves its step, until the
-     step is below ``xtol``; then a bounded Nelder-Mead polish of the best
-     point. Needs no gradient, so it copes with the kinks of the
-     absolute-value data energy (4.12): with noise-free data the maximum of a
-     pseudolikelihood sits at such a kink.
+     for ``d > 4``) in *one* batched call, moves each start to its best
+     neighbour and doubles its step (up to the first) if that improves, and
+     otherwise halves it, until the step is below ``xtol``; then a bounded
+     Nelder-Mead polish of the best point. Needs no gradient, so it copes with
+     the kinks of the absolute-value data energy (4.12): with noise-free data
+     the maximum of a pseudolikelihood sits at such a kink.
    * ``"nelder-mead"`` / ``"l-bfgs-b"``: :func:`scipy.optimize.minimize` with the
      bounds (L-BFGS-B gets central-difference gradients from one batched call).
 """
@@ -73,6 +73,10 @@ def _pattern(target, starts, f0, lo, hi, step0, xtol, max_iter, batch):
         idx = active[better]
         x[idx] = cand.reshape(active.size, nd, d)[better, best[better]]
         f[idx] = fbest[better]
+        # expand on success (up to the first step), contract on failure (as in GPS/MADS):
+        # a start crawling along a ridge regains its stride instead of running out of
+        # iterations (measured: 501 -> 234 batched calls on one 100x100 Ward scene)
+        step[idx] = np.minimum(2.0 * step[idx], step0)
         step[active[~better]] *= 0.5
     return x, f
 

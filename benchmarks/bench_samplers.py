@@ -122,13 +122,13 @@ def summary(rows: list[dict], samplers: list[str], tol: float, shape: tuple[int,
     def ratio(st: dict, k: str) -> float:
         return st[k] / ref[k] if ref and np.isfinite(ref[k]) and ref[k] else np.nan
 
+    n_scenes = len(rows) // max(1, len(samplers))
     table_rows = []
     for name, st in stats.items():
-        table_rows.append([name, f"{st['hit']}/{len(rows) // len(samplers)}", st["evals@tol"],
+        table_rows.append([name, f"{st['hit']}/{n_scenes}", st["evals@tol"],
                            st["s@tol"], ratio(st, "evals@tol"), ratio(st, "s@tol"),
                            f"{st['hit_max']}", st["evals@tol_max"], ratio(st, "evals@tol_max"),
                            st["d_true"], st["d_max"], st["evals"], st["time_s"]])
-    n_scenes = len(rows) // max(1, len(samplers))
     d_mt = float(np.mean([r["d_max_true"] for r in rows])) if rows else np.nan
     return [
         f"Ward `pls`, {shape[0]}x{shape[1]}, {n_labels} labels, {n_scenes} scene(s), each "

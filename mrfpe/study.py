@@ -417,16 +417,13 @@ def _execute(trial: TrialFn, study_name: str, config: dict, repeat: int, seed: i
     """
     import numba
 
-    before = numba.get_num_threads()
-    if numba_threads is not None:
-        numba.set_num_threads(max(1, min(int(numba_threads), numba.config.NUMBA_NUM_THREADS)))
-    try:
+    from mrfpe.targets.kernels import limit_threads
+
+    cap = numba.get_num_threads() if numba_threads is None else numba_threads
+    with limit_threads(cap) as used:
         t0 = time.perf_counter()
         ds = trial(copy.deepcopy(config), repeat, seed)
         wall = time.perf_counter() - t0
-        used = numba.get_num_threads()
-    finally:
-        numba.set_num_threads(before)
     if not isinstance(ds, xr.Dataset):
         raise TypeError(f"study {study_name!r}: trial must return an xarray.Dataset, "
                         f"got {type(ds).__name__}")

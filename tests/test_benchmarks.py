@@ -12,7 +12,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.mark.slow
-def test_benchmark_runner_quick(tmp_path):
+def test_benchmark_runner_quick():
     before = (ROOT / "benchmarks" / "RESULTS.md").read_bytes()
     proc = subprocess.run([sys.executable, "-m", "benchmarks", "--quick", "--no-write"],
                           cwd=ROOT, capture_output=True, text=True, timeout=600)

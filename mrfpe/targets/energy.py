@@ -35,6 +35,7 @@ with vertices in the lattice's order, exactly as the renderer does.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -95,7 +96,7 @@ class DataTables:
             "nodes", "slot_ptr", "slot_y", "slot_w", "slot_nvar", "fix_feat", "var_ptr",
             "var_feat")))
 
-    @property
+    @cached_property  # read on every log_prob call; the tables never change
     def brdf_evals_per_particle(self) -> int:
         """Triangle radiances one particle costs: variable entries + fixed triangles."""
         return int(self.var_feat.shape[1] + np.count_nonzero(self.slot_nvar == 1)

@@ -46,7 +46,7 @@ the number of threads.
 from __future__ import annotations
 
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import AbstractContextManager, contextmanager
 
 import numba
 import numpy as np
@@ -55,7 +55,8 @@ from numba import njit, prange, types
 from numba.extending import intrinsic, overload
 
 __all__ = ["BLOCK", "MIN_EVALS_PER_THREAD", "N_FEATURES", "block_size", "fexp", "flog",
-           "pl_terms", "pl_terms_labels", "thread_budget", "vexp", "vexp32", "vlog", "vlog32"]
+           "limit_threads", "pl_terms", "pl_terms_labels", "thread_budget", "vexp", "vexp32",
+           "vlog", "vlog32"]
 
 #: Largest number of particles per block (the SIMD dimension of the kernel).
 BLOCK = 64
@@ -494,16 +495,13 @@ MIN_EVALS_PER_THREAD = 200_000
 
 
 @contextmanager
-def thread_budget(n_evals: int) -> Iterator[int]:
-    """Run the enclosed kernel call on ``min(threads, n_evals // MIN_EVALS_PER_THREAD)`` threads.
+def limit_threads(n: int) -> Iterator[int]:
+    """Run the enclosed block on ``n`` numba threads (clipped to 1..``NUMBA_NUM_THREADS``).
 
-    Never more than numba's current setting (``NUMBA_NUM_THREADS`` or
-    :func:`numba.set_num_threads`, which the caller may have lowered), never fewer
-    than one; the previous setting is restored on exit. Results do not depend on
-    the thread count (the kernels' chunk sums are added in a fixed order).
+    The previous setting (thread-local in numba) is restored on exit, error or not.
     """
     have = numba.get_num_threads()
-    want = max(1, min(have, int(n_evals) // MIN_EVALS_PER_THREAD))
+    want = max(1, min(int(n), numba.config.NUMBA_NUM_THREADS))
     if want == have:
         yield have
         return
@@ -512,3 +510,15 @@ def thread_budget(n_evals: int) -> Iterator[int]:
         yield want
     finally:
         numba.set_num_threads(have)
+
+
+def thread_budget(n_evals: int) -> AbstractContextManager[int]:
+    """Run the enclosed kernel call on ``min(threads, n_evals // MIN_EVALS_PER_THREAD)`` threads.
+
+    Never more than numba's current setting (``NUMBA_NUM_THREADS`` or
+    :func:`numba.set_num_threads`, which the caller may have lowered), never fewer
+    than one; the previous setting is restored on exit (:func:`limit_threads`).
+    Results do not depend on the thread count (the kernels' chunk sums are added
+    in a fixed order).
+    """
+    return limit_threads(min(numba.get_num_threads(), int(n_evals) // MIN_EVALS_PER_THREAD))

@@ -14,7 +14,8 @@ __version__ = "0.1.0"
 
 _SUBMODULES = {
     "brdf", "geometry", "lattice", "shading", "scene", "synthetic", "targets", "samplers",
-    "posterior", "distances", "classify", "stereo", "testing", "study", "mrf",
+    "posterior", "distances", "classify", "stereo", "testing", "study", "resampling",
+    "mixture", "validation", "threads",
 }
 
 

@@ -24,31 +24,14 @@ import numpy as np
 import xarray as xr
 from scipy.special import logsumexp
 
+from mrfpe.resampling import ess, normalise_log_weights, perplexity
+from mrfpe.resampling import resample as _resample
+
 __all__ = [
     "build", "ess", "load", "map_estimate", "normalise_log_weights", "perplexity", "resample",
     "save", "summary", "to_arviz", "validate", "weighted_cov", "weighted_mean",
     "weighted_quantiles", "weights",
 ]
-
-
-def normalise_log_weights(log_w: Any) -> np.ndarray:
-    """Shift log weights so that logsumexp = 0.
-
-    NaN counts as -inf. If every weight is -inf (a degenerate set) the weights
-    become uniform, so downstream statistics stay defined; callers that need
-    to know should check the target values.
-    """
-    lw = np.asarray(log_w, dtype=np.float64).copy()
-    lw[np.isnan(lw)] = -np.inf
-    if lw.size == 0:
-        return lw
-    if np.isposinf(lw).any():  # +inf spikes dominate every finite weight: equal mass on them
-        return np.where(np.isposinf(lw), -np.log(np.isposinf(lw).sum()), -np.inf)
-    if not np.isfinite(lw).any():
-        return np.full_like(lw, -np.log(lw.size))
-    with np.errstate(over="ignore"):  # huge gaps underflow to -inf, which is the answer
-        lw = lw - np.max(lw)
-        return lw - np.log(np.sum(np.exp(lw)))
 
 
 def weights(post: xr.Dataset) -> np.ndarray:
@@ -166,39 +149,6 @@ def build(
 # --------------------------------------------------------------------------
 # Statistics of a weighted sample set
 # --------------------------------------------------------------------------
-def _log_weights(post_or_log_w: Any) -> np.ndarray:
-    if isinstance(post_or_log_w, xr.Dataset):
-        return normalise_log_weights(post_or_log_w["log_weight"].values)
-    return normalise_log_weights(np.asarray(post_or_log_w, dtype=np.float64).reshape(-1))
-
-
-def ess(post_or_log_w: Any) -> float:
-    """Kish's effective sample size ``(Σw)² / Σw²`` = ``1 / Σ w̃²`` (w̃ normalised).
-
-    Accepts a posterior Dataset or an array of (unnormalised) log weights.
-    Equal weights give the sample count; a single spike gives 1.
-    """
-    lw = _log_weights(post_or_log_w)
-    if lw.size == 0:
-        return 0.0
-    return float(np.exp(-logsumexp(2.0 * lw)))
-
-
-def perplexity(post_or_log_w: Any, *, normalised: bool = True) -> float:
-    """Perplexity ``exp(H)`` of the normalised weights, ``H = -Σ w̃ log w̃``.
-
-    With ``normalised=True`` (default) it is divided by the sample count and
-    lies in (0, 1], the criterion Cappé et al. use for PMC: 1 for equal
-    weights, ``1/S`` for a single spike.
-    """
-    lw = _log_weights(post_or_log_w)
-    if lw.size == 0:
-        return 0.0
-    w = np.exp(lw)
-    h = -np.sum(w[w > 0] * lw[w > 0])
-    return float(np.exp(h) / (lw.size if normalised else 1))
-
-
 def weighted_quantiles(post: xr.Dataset, q: Any) -> np.ndarray:
     """Importance-weighted quantiles of each parameter, shape (len(q), d).
 
@@ -252,7 +202,6 @@ def resample(post: xr.Dataset, n: int | None = None, method: str = "systematic",
     ``sample`` axis indexes other sets, are dropped. The attribute
     ``resampled`` records the method, count and seed.
     """
-    from mrfpe.resampling import resample as _resample
 
     n = post.sizes["sample"] if n is None else n
     if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 1:

@@ -1,4 +1,7 @@
-"""Resampling a weighted particle set: indices of the particles to keep.
+"""Weights of a particle set and resampling it: a leaf module (numpy and scipy only).
+
+Weight utilities: :func:`normalise_log_weights`, Kish's :func:`ess`,
+:func:`perplexity` and the safe :func:`log_ratio`; and resampling:
 
 ``resample(log_w, n, method, rng)`` returns ``n`` indices drawn in proportion
 to the weights ``exp(log_w)``. Every scheme is unbiased (each index's expected
@@ -22,12 +25,72 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from scipy.special import logsumexp
 
-from mrfpe.posterior import normalise_log_weights
-
-__all__ = ["METHODS", "resample"]
+__all__ = ["METHODS", "ess", "log_ratio", "normalise_log_weights", "perplexity", "resample"]
 
 METHODS = ("multinomial", "systematic", "stratified", "residual")
+
+
+def normalise_log_weights(log_w: Any) -> np.ndarray:
+    """Shift log weights so that logsumexp = 0.
+
+    NaN counts as -inf. If every weight is -inf (a degenerate set) the weights
+    become uniform, so downstream statistics stay defined; callers that need
+    to know should check the target values.
+    """
+    lw = np.asarray(log_w, dtype=np.float64).copy()
+    lw[np.isnan(lw)] = -np.inf
+    if lw.size == 0:
+        return lw
+    if np.isposinf(lw).any():  # +inf spikes dominate every finite weight: equal mass on them
+        return np.where(np.isposinf(lw), -np.log(np.isposinf(lw).sum()), -np.inf)
+    if not np.isfinite(lw).any():
+        return np.full_like(lw, -np.log(lw.size))
+    with np.errstate(over="ignore"):  # huge gaps underflow to -inf, which is the answer
+        lw = lw - np.max(lw)
+        return lw - np.log(np.sum(np.exp(lw)))
+
+
+def _log_weights(post_or_log_w: Any) -> np.ndarray:
+    if hasattr(post_or_log_w, "data_vars"):  # a posterior Dataset
+        return normalise_log_weights(post_or_log_w["log_weight"].values)
+    return normalise_log_weights(np.asarray(post_or_log_w, dtype=np.float64).reshape(-1))
+
+
+def ess(post_or_log_w: Any) -> float:
+    """Kish's effective sample size ``(Σw)² / Σw²`` = ``1 / Σ w̃²`` (w̃ normalised).
+
+    Accepts a posterior Dataset or an array of (unnormalised) log weights.
+    Equal weights give the sample count; a single spike gives 1.
+    """
+    lw = _log_weights(post_or_log_w)
+    if lw.size == 0:
+        return 0.0
+    return float(np.exp(-logsumexp(2.0 * lw)))
+
+
+def perplexity(post_or_log_w: Any, *, normalised: bool = True) -> float:
+    """Perplexity ``exp(H)`` of the normalised weights, ``H = -Σ w̃ log w̃``.
+
+    With ``normalised=True`` (default) it is divided by the sample count and
+    lies in (0, 1], the criterion Cappé et al. use for PMC: 1 for equal
+    weights, ``1/S`` for a single spike.
+    """
+    lw = _log_weights(post_or_log_w)
+    if lw.size == 0:
+        return 0.0
+    w = np.exp(lw)
+    h = -np.sum(w[w > 0] * lw[w > 0])
+    return float(np.exp(h) / (lw.size if normalised else 1))
+
+
+def log_ratio(num: Any, den: Any) -> np.ndarray:
+    """``num - den`` in log space where both are finite, ``-inf`` elsewhere (a particle
+    where the target or the proposal vanishes carries no weight)."""
+    num, den = np.broadcast_arrays(np.asarray(num, float), np.asarray(den, float))
+    ok = np.isfinite(num) & np.isfinite(den)
+    return np.subtract(num, den, out=np.full(num.shape, -np.inf), where=ok)
 
 
 def _cdf(w: np.ndarray) -> np.ndarray:

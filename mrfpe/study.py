@@ -417,7 +417,7 @@ def _execute(trial: TrialFn, study_name: str, config: dict, repeat: int, seed: i
     """
     import numba
 
-    from mrfpe.targets.kernels import limit_threads
+    from mrfpe.threads import limit_threads
 
     cap = numba.get_num_threads() if numba_threads is None else numba_threads
     with limit_threads(cap) as used:

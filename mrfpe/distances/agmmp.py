@@ -52,7 +52,7 @@ import numpy as np
 from scipy.spatial.distance import cdist
 
 from mrfpe.distances.base import SampleSet, Similarity
-from mrfpe.samplers.base import check_choice, check_range
+from mrfpe.validation import check_choice, check_range
 
 __all__ = ["AGMMP", "log_mixture_density", "set_log_likelihood"]
 

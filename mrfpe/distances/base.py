@@ -53,15 +53,9 @@ import numpy as np
 import xarray as xr
 
 from mrfpe.posterior import normalise_log_weights
+from mrfpe.validation import check_bool
 
 __all__ = ["Distance", "SampleSet", "Similarity", "as_sample_sets", "check_bool"]
-
-
-def check_bool(name: str, value: Any) -> bool:
-    """Return ``value`` if it is a bool, else raise ValueError naming ``name``."""
-    if not isinstance(value, bool | np.bool_):
-        raise ValueError(f"{name} must be True or False; got {value!r}")
-    return bool(value)
 
 
 @dataclass(frozen=True)

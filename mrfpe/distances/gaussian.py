@@ -58,7 +58,7 @@ import numpy as np
 
 from mrfpe.distances.base import Distance, SampleSet, check_bool
 from mrfpe.posterior import weighted_cov, weighted_mean
-from mrfpe.samplers.base import check_range
+from mrfpe.validation import check_range
 
 __all__ = [
     "KL", "Bhattacharyya", "Chernoff", "Gaussians", "Mahalanobis", "Matusita", "PatrickFisher",

@@ -32,7 +32,7 @@ import numpy as np
 from scipy.spatial.distance import cdist
 
 from mrfpe.distances.base import Distance, SampleSet
-from mrfpe.samplers.base import check_positive_int, check_range
+from mrfpe.validation import check_positive_int, check_range
 
 __all__ = ["EMD", "SlicedWasserstein"]
 

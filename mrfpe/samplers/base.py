@@ -13,43 +13,11 @@ import inspect
 from collections.abc import Callable
 from typing import Any
 
+from mrfpe.validation import check_choice, check_positive_int, check_range
+
 __all__ = ["Sampler", "check_choice", "check_positive_int", "check_range"]
 
 Callback = Callable[[int, dict], Any]
-
-
-def check_positive_int(name: str, value: Any, minimum: int = 1) -> int:
-    """Return ``value`` as int, or raise ValueError naming ``name``."""
-    if isinstance(value, bool) or (not isinstance(value, (int,)) and not (
-        hasattr(value, "__index__")
-    )):
-        raise ValueError(f"{name} must be an integer >= {minimum}; got {value!r}")
-    value = int(value)
-    if value < minimum:
-        raise ValueError(f"{name} must be an integer >= {minimum}; got {value}")
-    return value
-
-
-def check_range(name: str, value: Any, low: float, high: float, *,
-                low_open: bool = False, high_open: bool = False) -> float:
-    """Return ``value`` as float if it lies in the interval, else raise ValueError."""
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a number; got {value!r}") from None
-    lo_ok = v > low if low_open else v >= low
-    hi_ok = v < high if high_open else v <= high
-    if not (lo_ok and hi_ok) or v != v:
-        lb, hb = "(" if low_open else "[", ")" if high_open else "]"
-        raise ValueError(f"{name} must lie in {lb}{low}, {high}{hb}; got {value!r}")
-    return v
-
-
-def check_choice(name: str, value: Any, choices: tuple[str, ...]) -> str:
-    """Return ``value`` if it is one of ``choices``, else raise ValueError."""
-    if value not in choices:
-        raise ValueError(f"{name} must be one of {', '.join(map(repr, choices))}; got {value!r}")
-    return value
 
 
 class Sampler:

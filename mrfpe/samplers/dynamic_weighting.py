@@ -51,9 +51,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from mrfpe.samplers._common import Run, check_seed, check_target
-from mrfpe.samplers._mcmc import check_chain_length, draw_in_support
 from mrfpe.samplers.base import Callback, Sampler, check_choice, check_positive_int, check_range
+from mrfpe.samplers.kit import Run, check_chain_length, check_seed, check_target, draw_in_support
 
 __all__ = ["QTypeDynamicWeighting", "RTypeDynamicWeighting", "dw_update"]
 

@@ -4,7 +4,7 @@ Beyond the thesis: a modern MCMC baseline next to its Metropolis–Hastings
 (5.41–5.46) and dynamic weighting (5.47–5.49). ``emcee.EnsembleSampler`` runs
 with ``vectorize=True``, so each half-ensemble update is one batched
 ``log_prob`` call. Walkers start uniformly inside the bounds (redrawn where the
-target is −inf, :func:`~mrfpe.samplers._mcmc.draw_in_support`); emcee's
+target is −inf, :func:`~mrfpe.samplers.kit.draw_in_support`); emcee's
 random state is seeded from the same ``SeedSequence`` as the start points, so
 one ``seed`` fixes every number. The target is −inf outside its bounds, so
 stretch moves that leave the box are rejected and every sample respects the
@@ -19,9 +19,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from mrfpe.samplers._common import Run, check_seed, check_target
-from mrfpe.samplers._mcmc import check_chain_length, draw_in_support
 from mrfpe.samplers.base import Callback, Sampler, check_positive_int, check_range
+from mrfpe.samplers.kit import Run, check_chain_length, check_seed, check_target, draw_in_support
 
 __all__ = ["EmceeEnsemble"]
 

@@ -3,7 +3,7 @@
 Both start one local optimisation from each of ``n_seeds`` evenly spaced points
 of the parameter box (512 by default, 7.3.2 step 1: "seeds ... distributed as
 the samples in Fig. 7.15", i.e. the same grid as PMC's initial set,
-:func:`mrfpe.samplers._common.grid`; 8³ cell centres in 3-D). The optima are the
+:func:`mrfpe.samplers.kit.grid`; 8³ cell centres in 3-D). The optima are the
 sample set, each weighted by its target value (``log_weight = log_target``), so
 the posterior's MAP is the best optimum and the set can be compared with the
 samplers' sets. The best-so-far trace runs over the seed index (step = seed),
@@ -26,8 +26,8 @@ from typing import Any
 
 import numpy as np
 
-from mrfpe.samplers._common import Run, check_seed, check_target, grid
 from mrfpe.samplers.base import Callback, Sampler, check_choice, check_positive_int, check_range
+from mrfpe.samplers.kit import Run, check_seed, check_target, grid
 
 __all__ = ["LMMultiSeed", "NLoptMultiSeed", "seed_points"]
 

@@ -47,12 +47,12 @@ from typing import ClassVar
 
 import numpy as np
 import xarray as xr
-from scipy.special import logsumexp
 
 from mrfpe.posterior import ess, normalise_log_weights
 from mrfpe.resampling import METHODS
 from mrfpe.resampling import resample as _resample
-from mrfpe.samplers._common import (
+from mrfpe.samplers.base import Sampler, check_choice, check_positive_int, check_range
+from mrfpe.samplers.kit import (
     THESIS_POWER,
     Run,
     check_seed,
@@ -60,33 +60,13 @@ from mrfpe.samplers._common import (
     grid,
     jitter,
     log_kernel_mass,
+    log_mixture_density,
     log_ratio,
     partition_or_none,
     softened,
 )
-from mrfpe.samplers.base import Sampler, check_choice, check_positive_int, check_range
 
-__all__ = ["PMC", "THESIS_POWER", "log_mixture_density"]
-
-
-def log_mixture_density(x: np.ndarray, centres: np.ndarray, log_w: np.ndarray,
-                        sigma: float | np.ndarray, chunk: int = 2_000_000) -> np.ndarray:
-    """``log Σ_u w_u N(x; c_u, diag(σ²))`` for every row of ``x`` (N, d).
-
-    ``sigma`` is a scalar or one scale per parameter; ``log_w`` (U,) are log
-    mixture weights. Rows are processed in chunks so that at most ``chunk``
-    (row, component) pairs are held at once.
-    """
-    d = x.shape[1]
-    sig = np.broadcast_to(np.asarray(sigma, dtype=np.float64), (d,))
-    xs, cs = x / sig, centres / sig  # whiten: the kernel becomes spherical with unit scale
-    out = np.empty(x.shape[0])
-    rows = max(1, chunk // max(1, centres.shape[0]))
-    norm = -0.5 * d * np.log(2.0 * np.pi) - np.sum(np.log(sig))
-    for s in range(0, x.shape[0], rows):
-        diff = xs[s:s + rows, None, :] - cs[None, :, :]
-        out[s:s + rows] = logsumexp(log_w - 0.5 * np.einsum("nud,nud->nu", diff, diff), axis=1)
-    return out + norm
+__all__ = ["PMC", "THESIS_POWER"]
 
 
 class PMC(Sampler):

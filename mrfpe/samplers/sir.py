@@ -34,7 +34,8 @@ import xarray as xr
 from mrfpe.posterior import ess, normalise_log_weights
 from mrfpe.resampling import METHODS
 from mrfpe.resampling import resample as _resample
-from mrfpe.samplers._common import (
+from mrfpe.samplers.base import Sampler, check_choice, check_positive_int, check_range
+from mrfpe.samplers.kit import (
     THESIS_POWER,
     Run,
     check_seed,
@@ -45,7 +46,6 @@ from mrfpe.samplers._common import (
     partition_or_none,
     softened,
 )
-from mrfpe.samplers.base import Sampler, check_choice, check_positive_int, check_range
 
 __all__ = ["SIR"]
 

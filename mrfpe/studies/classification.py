@@ -62,7 +62,7 @@ def trial(config: dict, repeat: int, seed: int) -> xr.Dataset:
     """One specimen: scene, target, and its unevolved, evolved and LM feature sets."""
     import mrfpe
     from mrfpe.posterior import normalise_log_weights
-    from mrfpe.samplers._common import grid
+    from mrfpe.samplers.kit import grid
 
     brdf, material, specimen = config["brdf"], config["material"], config["specimen"]
     s_scene, s_pmc, s_lm = child_seeds(seed, 3)

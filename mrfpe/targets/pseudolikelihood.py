@@ -54,6 +54,7 @@ import numpy as np
 
 from mrfpe.targets.base import Target, as_theta_batch
 from mrfpe.targets.energy import DATA_TERMS, DataTables, build_tables, chunk_bounds
+from mrfpe.threads import thread_budget
 
 __all__ = [
     "PL",
@@ -278,7 +279,7 @@ class BRDFTarget(Target):
         args = (t.slot_ptr, t.slot_y, t.slot_w, t.slot_nvar, t.fix_feat, t.var_ptr, t.var_feat,
                 self._unary_e, self._obs, ft(1.0 / self.sigma_b), self._chunks, ft(self._a),
                 ft(self._b), self._b != 0, out_chunk, out_node, per_node)
-        with kernels.thread_budget(N * t.brdf_evals_per_particle):
+        with thread_budget(N * t.brdf_evals_per_particle):
             if labels_simd:
                 kernels.pl_terms_labels(coef_t, full, *args)
             else:

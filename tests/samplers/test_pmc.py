@@ -5,8 +5,9 @@ import pytest
 from scipy import stats
 
 from mrfpe import posterior as P
-from mrfpe.samplers._common import grid, jitter, log_kernel_mass
-from mrfpe.samplers.pmc import PMC, log_mixture_density
+from mrfpe.mixture import log_mixture_density
+from mrfpe.samplers.kit import grid, jitter, log_kernel_mass
+from mrfpe.samplers.pmc import PMC
 from mrfpe.testing import CorrelatedGaussian, TwoModes
 
 QUICK = {"n_samples": 200, "n_iterations": 6, "power": 1.0}

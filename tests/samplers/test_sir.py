@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from mrfpe import posterior as P
-from mrfpe.samplers._common import grid
+from mrfpe.samplers.kit import grid
 from mrfpe.samplers.sir import SIR
 from mrfpe.testing import CorrelatedGaussian, TwoModes
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 import pytest
 from numba import njit
@@ -11,11 +10,9 @@ from mrfpe.targets import reflectance
 from mrfpe.targets.energy import DataTables, chunk_bounds, energies_reference
 from mrfpe.targets.kernels import (
     BLOCK,
-    MIN_EVALS_PER_THREAD,
     block_size,
     pl_terms,
     pl_terms_labels,
-    thread_budget,
     vexp,
     vlog,
 )
@@ -194,17 +191,3 @@ def test_float32_kernel_close_to_numpy(labels):
     else:
         pl_terms(ct, bl, True, *args)
     np.testing.assert_allclose(oc[:, :N].sum(axis=0), want, rtol=2e-6)
-
-
-def test_thread_budget_scales_with_work_and_restores():
-    have = numba.get_num_threads()
-    with thread_budget(10) as n:
-        assert n == numba.get_num_threads() == 1
-    assert numba.get_num_threads() == have
-    with thread_budget(10**12) as n:  # never more than the current setting
-        assert n == numba.get_num_threads() == have
-    with thread_budget(2 * MIN_EVALS_PER_THREAD) as n:
-        assert n == min(have, 2)
-    with pytest.raises(RuntimeError), thread_budget(1):
-        raise RuntimeError("restored on error too")
-    assert numba.get_num_threads() == have

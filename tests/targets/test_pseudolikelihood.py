@@ -304,12 +304,12 @@ def test_batch_invariance(tiny):
 
 def test_thread_count_does_not_change_values(tiny, monkeypatch):
     """The per-call thread budget changes speed, never the numbers."""
-    from mrfpe.targets import kernels
+    from mrfpe import threads
 
     t = get("pls", tiny)
     x = np.random.default_rng(7).random((70, 3))
     default = t.log_prob(x)
-    monkeypatch.setattr(kernels, "MIN_EVALS_PER_THREAD", 1)  # every call on all threads
+    monkeypatch.setattr(threads, "MIN_EVALS_PER_THREAD", 1)  # every call on all threads
     np.testing.assert_array_equal(t.log_prob(x), default)
     np.testing.assert_array_equal(t.log_prob(x[:3]), default[:3])
 

@@ -1,28 +1,31 @@
-"""Chain-length checks and start points for the chain samplers (mh, dw_q, dw_r, emcee).
-
-Book-keeping (evaluation counts, MAP trace, progress, callback) is
-:class:`mrfpe.samplers._common.Run`; this module adds what only chains need.
-Private to mrfpe: third-party plugins use the public API only.
-"""
+"""Starting points: the thesis's evenly spaced grid and uniform draws inside the support."""
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
 
-from mrfpe.samplers.base import check_positive_int
-
-__all__ = ["check_chain_length", "draw_in_support"]
+__all__ = ["draw_in_support", "grid"]
 
 
-def check_chain_length(n_steps: Any, burn_in: Any, thin: Any) -> tuple[int, int, int]:
-    """Validate ``n_steps`` >= 1, 0 <= ``burn_in`` < ``n_steps`` and ``thin`` >= 1."""
-    n_steps = check_positive_int("n_steps", n_steps)
-    burn_in_ = check_positive_int("burn_in", burn_in, minimum=0)
-    if burn_in_ >= n_steps:
-        raise ValueError(f"burn_in must be < n_steps ({n_steps}); got {burn_in}")
-    return n_steps, burn_in_, check_positive_int("thin", thin)
+def grid(bounds: np.ndarray, n: int) -> np.ndarray:
+    """``n`` evenly spaced points in the box (the thesis's initial set, 6.6.1–6.6.2).
+
+    The box is cut into ``m = ceil(n^(1/d))`` cells per axis and the cell
+    centres are used (1000 = 10³ in 3-D gives the thesis's 10×10×10 grid); when
+    ``n`` is not a perfect power, ``n`` of the ``m^d`` centres are taken at
+    evenly spaced positions of the lexicographic order.
+    """
+    b = np.asarray(bounds, dtype=np.float64)
+    d = b.shape[0]
+    m = max(1, math.ceil(round(n ** (1.0 / d), 9)))
+    axes = [b[j, 0] + (np.arange(m) + 0.5) / m * (b[j, 1] - b[j, 0]) for j in range(d)]
+    pts = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, d)
+    if pts.shape[0] == n:
+        return pts
+    return pts[np.round(np.linspace(0, pts.shape[0] - 1, n)).astype(np.int64)]
 
 
 def draw_in_support(run: Any, target: Any, rng: np.random.Generator, n: int,

@@ -1,0 +1,62 @@
+"""The sampler author's kit: the helpers every built-in sampler uses, public for plugins.
+
+A plugin sampler written with the kit looks exactly like a built-in one::
+
+    from mrfpe.samplers import kit
+
+    bounds = kit.check_target(target)       # validate the Target contract
+    kit.check_seed(seed)
+    run = kit.Run(target, n_steps, progress=progress, callback=callback)
+    x = kit.grid(bounds, n)                 # or kit.draw_in_support(...)
+    lw = run.evaluate(target, x)            # counted, NaN -> -inf
+    idx = kit.resample(lw, n, "systematic", rng)
+    ...
+    return run.finish(x, lt, lw, sampler=..., config=..., seed=seed)
+
+Contents
+--------
+Run log
+    :class:`Run` (evaluation counting, MAP trace, ESS trace, progress bar,
+    callback, posterior assembly).
+Validators
+    :func:`check_target`, :func:`check_seed`, :func:`check_positive_int`,
+    :func:`check_range`, :func:`check_choice`, :func:`check_bool`,
+    :func:`check_chain_length`.
+Starting points
+    :func:`grid` (the thesis's evenly spaced set), :func:`draw_in_support`.
+Jitter kernels
+    :func:`jitter` (Gaussian truncated to the box), :func:`log_kernel_mass`
+    (its normalisers), :func:`log_mixture_density`.
+Importance functions
+    :func:`partition_or_none`, :func:`softened`, :data:`THESIS_POWER`.
+Weights and resampling
+    :func:`resample`, :data:`RESAMPLING_METHODS`, :func:`ess`,
+    :func:`normalise_log_weights`, :func:`log_ratio`, :func:`perplexity`.
+"""
+
+from __future__ import annotations
+
+from mrfpe.mixture import log_mixture_density
+from mrfpe.resampling import METHODS as RESAMPLING_METHODS
+from mrfpe.resampling import ess, log_ratio, normalise_log_weights, perplexity, resample
+from mrfpe.samplers.kit.chains import check_chain_length
+from mrfpe.samplers.kit.draws import draw_in_support, grid
+from mrfpe.samplers.kit.importance import THESIS_POWER, partition_or_none, softened
+from mrfpe.samplers.kit.jitter import jitter, log_kernel_mass
+from mrfpe.samplers.kit.runlog import Run
+from mrfpe.validation import (
+    check_bool,
+    check_choice,
+    check_positive_int,
+    check_range,
+    check_seed,
+    check_target,
+)
+
+__all__ = [
+    "RESAMPLING_METHODS", "THESIS_POWER", "Run", "check_bool", "check_chain_length",
+    "check_choice", "check_positive_int", "check_range", "check_seed", "check_target",
+    "draw_in_support", "ess", "grid", "jitter", "log_kernel_mass", "log_mixture_density",
+    "log_ratio", "normalise_log_weights", "partition_or_none", "perplexity", "resample",
+    "softened",
+]

@@ -1,0 +1,113 @@
+"""The run log every sampler keeps: :class:`Run`.
+
+It counts target evaluations in full-lattice-equivalent units (``target.cost``
+per evaluated particle), keeps the best-so-far (MAP) trace under the *full*
+target, records the ESS per step, drives the tqdm progress bar and the
+``callback(step, info)`` hook, and assembles the posterior through
+:func:`mrfpe.posterior.build`.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+import xarray as xr
+
+from mrfpe.posterior import build
+
+__all__ = ["Run"]
+
+
+class Run:
+    """Book-keeping of one sampler run (see the module docstring).
+
+    Parameters
+    ----------
+    target : the full target (its values define the MAP trace).
+    n_steps : number of steps, for the progress bar.
+    progress : show a tqdm bar (stderr) with the step's ESS and extra info.
+    callback : ``callback(step, info)`` after each step; ``info`` holds ``ess``,
+        ``map_log_target``, ``n_target_evals`` and the sampler's extras.
+    """
+
+    def __init__(self, target: Any, n_steps: int, *, progress: bool = False,
+                 callback: Callable[[int, dict], Any] | None = None, desc: str = ""):
+        if callback is not None and not callable(callback):
+            raise ValueError(f"callback must be callable or None; got {callback!r}")
+        self.target = target
+        self.d = len(target.param_names)
+        self.n_evals = 0.0
+        self.best_theta = np.full(self.d, np.nan)
+        self.best_lt = -np.inf
+        self.map_theta: list[np.ndarray] = []
+        self.map_log_target: list[float] = []
+        self.ess: list[float] = []
+        self.callback = callback
+        self.t0 = time.perf_counter()
+        self._bar = None
+        if progress:
+            from tqdm.auto import tqdm
+
+            self._bar = tqdm(total=n_steps, desc=desc, leave=False, file=sys.stderr)
+
+    def evaluate(self, fn: Any, theta: np.ndarray) -> np.ndarray:
+        """``fn.log_prob(theta)`` with NaN -> -inf, counting ``fn.cost`` per row."""
+        theta = np.asarray(theta, dtype=np.float64)
+        lp = np.asarray(fn.log_prob(theta), dtype=np.float64).reshape(-1)
+        if lp.shape[0] != theta.shape[0]:
+            raise ValueError(f"log_prob returned {lp.shape[0]} values for {theta.shape[0]} rows")
+        self.n_evals += float(getattr(fn, "cost", 1.0)) * theta.shape[0]
+        return np.where(np.isnan(lp), -np.inf, lp)
+
+    def offer(self, theta: np.ndarray, log_target: np.ndarray) -> None:
+        """Update the best-so-far point with full-target values ``log_target`` of ``theta``."""
+        if log_target.size == 0:
+            return
+        i = int(np.argmax(log_target))
+        if log_target[i] > self.best_lt or np.isnan(self.best_theta).all():
+            self.best_lt, self.best_theta = float(log_target[i]), theta[i].copy()
+
+    def offer_candidate(self, theta: np.ndarray, score: np.ndarray) -> None:
+        """Evaluate the full target at the particle with the highest ``score`` (one
+        evaluation) and offer it: a cheap MAP trace when the steps use partial targets."""
+        if score.size == 0 or not np.isfinite(score).any():
+            return
+        i = int(np.argmax(score))
+        self.offer(theta[i:i + 1], self.evaluate(self.target, theta[i:i + 1]))
+
+    def step(self, step: int, ess_value: float, **info: Any) -> None:
+        """Close a step: append the MAP trace and ESS, update the bar, call the callback."""
+        self.map_theta.append(self.best_theta.copy())
+        self.map_log_target.append(self.best_lt)
+        self.ess.append(float(ess_value))
+        if self._bar is not None:
+            self._bar.update(1)
+            self._bar.set_postfix(ess=f"{ess_value:.1f}", map=f"{self.best_lt:.4g}",
+                                  **{k: (f"{v:.3g}" if isinstance(v, float) else v)
+                                     for k, v in info.items()})
+        if self.callback is not None:
+            self.callback(int(step), {"ess": float(ess_value), "map_log_target": self.best_lt,
+                                      "map_theta": self.best_theta.copy(),
+                                      "n_target_evals": self.n_evals, **info})
+
+    def finish(self, theta: np.ndarray, log_target: np.ndarray, log_weight: np.ndarray, *,
+               sampler: str, config: dict, seed: int | None,
+               history_theta: Any = None, history_log_weight: Any = None,
+               extra_vars: dict | None = None) -> xr.Dataset:
+        """Close the bar and build the posterior Dataset."""
+        if self._bar is not None:
+            self._bar.close()
+        mt = np.asarray(self.map_theta)
+        if np.isnan(mt).any():  # no finite point was ever seen: fall back to the set
+            first = theta[0]
+            mt = np.where(np.isnan(mt), first, mt)
+        return build(theta, log_target, param_names=self.target.param_names,
+                     log_weight=log_weight, map_theta=mt, map_log_target=self.map_log_target,
+                     ess=self.ess, history_theta=history_theta,
+                     history_log_weight=history_log_weight, sampler=sampler, config=config,
+                     seed=seed, target=self.target, n_target_evals=self.n_evals,
+                     wall_time_s=time.perf_counter() - self.t0, extra_vars=extra_vars)

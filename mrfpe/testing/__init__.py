@@ -1,0 +1,34 @@
+"""Conformance checks shipped for plugin authors (like scikit-learn's ``check_estimator``).
+
+- :mod:`mrfpe.testing.samplers`: :func:`check_sampler` and its individual checks;
+- :mod:`mrfpe.testing.targets`: the analytic targets they run on.
+
+Everything is re-exported here, so ``from mrfpe.testing import check_sampler`` works.
+"""
+
+from __future__ import annotations
+
+from mrfpe.testing.samplers import (
+    CHECKS,
+    check_bounds,
+    check_callback,
+    check_config,
+    check_gaussian_moments,
+    check_interface,
+    check_map_trace,
+    check_mostly_minus_inf,
+    check_netcdf_roundtrip,
+    check_reproducible,
+    check_sampler,
+    check_schema,
+    check_two_modes,
+    run_check,
+)
+from mrfpe.testing.targets import CorrelatedGaussian, MostlyMinusInf, TwoModes
+
+__all__ = [
+    "CHECKS", "CorrelatedGaussian", "MostlyMinusInf", "TwoModes", "check_bounds",
+    "check_callback", "check_config", "check_gaussian_moments", "check_interface",
+    "check_map_trace", "check_mostly_minus_inf", "check_netcdf_roundtrip",
+    "check_reproducible", "check_sampler", "check_schema", "check_two_modes", "run_check",
+]

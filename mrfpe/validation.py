@@ -1,0 +1,90 @@
+"""Argument validators shared by samplers, targets, distances and studies.
+
+A leaf module (it imports only numpy): every public boundary checks its inputs
+with these, so that a bad value gets a ``ValueError`` that names the argument
+and says what was expected, before any expensive work starts.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+__all__ = ["check_bool", "check_bounds", "check_choice", "check_positive_int", "check_range",
+           "check_seed", "check_target"]
+
+
+def check_positive_int(name: str, value: Any, minimum: int = 1) -> int:
+    """Return ``value`` as int, or raise ValueError naming ``name``."""
+    if isinstance(value, bool) or (not isinstance(value, (int,)) and not (
+        hasattr(value, "__index__")
+    )):
+        raise ValueError(f"{name} must be an integer >= {minimum}; got {value!r}")
+    value = int(value)
+    if value < minimum:
+        raise ValueError(f"{name} must be an integer >= {minimum}; got {value}")
+    return value
+
+
+def check_range(name: str, value: Any, low: float, high: float, *,
+                low_open: bool = False, high_open: bool = False) -> float:
+    """Return ``value`` as float if it lies in the interval, else raise ValueError."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number; got {value!r}") from None
+    lo_ok = v > low if low_open else v >= low
+    hi_ok = v < high if high_open else v <= high
+    if not (lo_ok and hi_ok) or v != v:
+        lb, hb = "(" if low_open else "[", ")" if high_open else "]"
+        raise ValueError(f"{name} must lie in {lb}{low}, {high}{hb}; got {value!r}")
+    return v
+
+
+def check_choice(name: str, value: Any, choices: tuple[str, ...]) -> str:
+    """Return ``value`` if it is one of ``choices``, else raise ValueError."""
+    if value not in choices:
+        raise ValueError(f"{name} must be one of {', '.join(map(repr, choices))}; got {value!r}")
+    return value
+
+
+def check_bool(name: str, value: Any) -> bool:
+    """Return ``value`` if it is a bool, else raise ValueError naming ``name``."""
+    if not isinstance(value, bool | np.bool_):
+        raise ValueError(f"{name} must be True or False; got {value!r}")
+    return bool(value)
+
+
+def check_seed(seed: Any, name: str = "seed") -> int | None:
+    """Return ``seed`` if it is a non-negative integer or None, else raise ValueError."""
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int | np.integer)
+                             or seed < 0):
+        raise ValueError(f"{name} must be a non-negative integer or None; got {seed!r}")
+    return None if seed is None else int(seed)
+
+
+def check_bounds(bounds: Any, d: int, name: str = "bounds") -> np.ndarray:
+    """``bounds`` as a finite (d, 2) float array with lower < upper, or ValueError."""
+    try:
+        b = np.asarray(bounds, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a finite ({d}, 2) array of numbers; "
+                         f"got {bounds!r}") from None
+    if b.shape != (d, 2) or not np.all(np.isfinite(b)) or np.any(b[:, 0] >= b[:, 1]):
+        raise ValueError(f"{name} must be a finite ({d}, 2) array with lower < upper; "
+                         f"got {b.tolist()}")
+    return b
+
+
+def check_target(target: Any) -> np.ndarray:
+    """The target's bounds as a finite (d, 2) float array, or ValueError naming the problem.
+
+    A target provides ``param_names``, ``bounds`` and a batched ``log_prob``
+    (the Target contract, :class:`mrfpe.targets.base.Target`).
+    """
+    for attr in ("param_names", "bounds", "log_prob"):
+        if not hasattr(target, attr):
+            raise ValueError(f"target must provide {attr!r} (the Target contract); "
+                             f"got {type(target).__name__}")
+    return check_bounds(target.bounds, len(target.param_names), "target.bounds")

@@ -52,7 +52,14 @@ from typing import Any, ClassVar
 import numpy as np
 
 from mrfpe.samplers.base import Callback, Sampler, check_choice, check_positive_int, check_range
-from mrfpe.samplers.kit import Run, check_chain_length, check_seed, check_target, draw_in_support
+from mrfpe.samplers.kit import (
+    KeptStates,
+    Run,
+    check_chain_length,
+    check_seed,
+    check_target,
+    draw_in_support,
+)
 
 __all__ = ["QTypeDynamicWeighting", "RTypeDynamicWeighting", "dw_update"]
 
@@ -140,12 +147,8 @@ class _DynamicWeighting(Sampler):
         x, lp = draw_in_support(run, target, rng, c, bounds)
         log_pi = self._initial_log_weight(lp)
         acceptance = np.zeros(n)
-        kept_steps = np.arange(self.burn_in, n, self.thin)
-        kept_x = np.empty((kept_steps.size, c, d))
-        kept_lp = np.empty((kept_steps.size, c))
-        kept_lw = np.empty((kept_steps.size, c))
+        kept = KeptStates(n, self.burn_in, self.thin, c, d, weighted=True)
         lse1 = lse2 = -np.inf  # running logsumexp of the kept log w and 2 log w (Kish ESS)
-        k = 0
         for t in range(n):
             y = x + sd * rng.standard_normal((c, d))
             inside = np.all((y >= lo) & (y <= hi), axis=1)
@@ -164,18 +167,15 @@ class _DynamicWeighting(Sampler):
             x[accept], lp[accept] = y[accept], lpy[accept]
             acceptance[t] = accept.mean()
             run.offer(x, lp)
-            if k < kept_steps.size and t == kept_steps[k]:
-                kept_x[k], kept_lp[k], kept_lw[k] = x, lp, log_pi
+            if kept.record(t, x, lp, log_pi):
                 lse1 = np.logaddexp(lse1, np.logaddexp.reduce(log_pi))
                 lse2 = np.logaddexp(lse2, np.logaddexp.reduce(2 * log_pi))
-                k += 1
             ess = np.exp(2 * lse1 - lse2) if np.isfinite(lse1) else np.nan
             run.step(t, ess, acceptance=float(acceptance[t]),
                      max_log_weight=float(np.max(log_pi)))
-        lw = kept_lw.reshape(-1)
-        return run.finish(kept_x.reshape(-1, d), kept_lp.reshape(-1), lw, sampler=self.name,
-                          config=self.get_config(), seed=seed,
-                          extra_vars={"acceptance": (("step",), acceptance)})
+        theta, log_target, lw = kept.flat()
+        return run.finish(theta, log_target, lw, sampler=self.name, config=self.get_config(),
+                          seed=seed, extra_vars={"acceptance": (("step",), acceptance)})
 
     def _initial_log_weight(self, lp: np.ndarray) -> np.ndarray:
         """log Π₀ per chain (7.13 and the variants of ``initial_weight``)."""

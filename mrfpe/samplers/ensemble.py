@@ -20,7 +20,14 @@ from typing import Any, ClassVar
 import numpy as np
 
 from mrfpe.samplers.base import Callback, Sampler, check_positive_int, check_range
-from mrfpe.samplers.kit import Run, check_chain_length, check_seed, check_target, draw_in_support
+from mrfpe.samplers.kit import (
+    KeptStates,
+    Run,
+    check_chain_length,
+    check_seed,
+    check_target,
+    draw_in_support,
+)
 
 __all__ = ["EmceeEnsemble"]
 
@@ -75,10 +82,8 @@ class EmceeEnsemble(Sampler):
                                         moves=emcee.moves.StretchMove(a=self.stretch_scale))
         rstate = np.random.RandomState(np.random.MT19937(ss_emcee)).get_state()
         acceptance = np.zeros(n)
-        kept_steps = np.arange(self.burn_in, n, self.thin)
-        kept_x = np.empty((kept_steps.size, w, d))
-        kept_lp = np.empty((kept_steps.size, w))
-        prev, k = p0, 0
+        kept = KeptStates(n, self.burn_in, self.thin, w, d)
+        prev = p0
         states = sampler.sample(emcee.State(p0, log_prob=lp0, random_state=rstate),
                                 iterations=n, store=False, skip_initial_state_check=True)
         for t, state in enumerate(states):
@@ -86,15 +91,14 @@ class EmceeEnsemble(Sampler):
             acceptance[t] = np.mean(np.any(x != prev, axis=1))  # a rejected walker stays put
             prev = x.copy()
             run.offer(x, lp)
-            if k < kept_steps.size and t == kept_steps[k]:
-                kept_x[k], kept_lp[k] = x, lp
-                k += 1
+            kept.record(t, x, lp)
             run.step(t, np.nan, acceptance=float(acceptance[t]))
         try:
-            tau = emcee.autocorr.integrated_time(kept_x, tol=0)  # tol=0: no length warning
+            tau = emcee.autocorr.integrated_time(kept.theta, tol=0)  # tol=0: no length warning
         except Exception:  # a chain too short to estimate it
             tau = np.full(d, np.nan)
-        return run.finish(kept_x.reshape(-1, d), kept_lp.reshape(-1), None, sampler=self.name,
-                          config=self.get_config(), seed=seed,
-                          extra_vars={"acceptance": (("step",), acceptance),
-                                      "autocorr_time": (("param",), np.asarray(tau, float))})
+        theta, log_target, _ = kept.flat()
+        extra = {"acceptance": (("step",), acceptance),
+                 "autocorr_time": (("param",), np.asarray(tau, float))}
+        return run.finish(theta, log_target, None, sampler=self.name, config=self.get_config(),
+                          seed=seed, extra_vars=extra)

@@ -25,7 +25,15 @@ from typing import Any, ClassVar
 import numpy as np
 
 from mrfpe.samplers.base import Callback, Sampler, check_positive_int, check_range
-from mrfpe.samplers.kit import Run, check_chain_length, check_seed, check_target, draw_in_support
+from mrfpe.samplers.kit import (
+    KeptStates,
+    Run,
+    check_bool,
+    check_chain_length,
+    check_seed,
+    check_target,
+    draw_in_support,
+)
 
 __all__ = ["MetropolisHastings", "metropolis_accept"]
 
@@ -77,9 +85,7 @@ class MetropolisHastings(Sampler):
         self.n_chains = check_positive_int("n_chains", n_chains)
         self.proposal_sd = check_range("proposal_sd", proposal_sd, 0.0, np.inf,
                                        low_open=True, high_open=True)
-        if not isinstance(adapt, bool):
-            raise ValueError(f"adapt must be True or False; got {adapt!r}")
-        self.adapt = adapt
+        self.adapt = check_bool("adapt", adapt)
         self.target_acceptance = check_range("target_acceptance", target_acceptance, 0.0, 1.0,
                                              low_open=True, high_open=True)
 
@@ -97,11 +103,8 @@ class MetropolisHastings(Sampler):
         chol = np.diag(self.proposal_sd * (hi - lo))
         log_scale, shaped = 0.0, False
         acceptance, scales = np.zeros(n), np.zeros(n)
-        kept_steps = np.arange(self.burn_in, n, self.thin)
-        kept_x = np.empty((kept_steps.size, c, d))
-        kept_lp = np.empty((kept_steps.size, c))
+        kept = KeptStates(n, self.burn_in, self.thin, c, d)
         burn = np.empty((self.burn_in, c, d)) if self.adapt else None
-        k = 0
         for t in range(n):
             scale = np.exp(log_scale)
             y = x + scale * rng.standard_normal((c, d)) @ chol.T
@@ -113,7 +116,7 @@ class MetropolisHastings(Sampler):
             x[accept], lp[accept] = y[accept], lpy[accept]
             acceptance[t], scales[t] = accept.mean(), scale
             run.offer(x, lp)
-            if t < self.burn_in and self.adapt:
+            if t < self.burn_in and self.adapt:  # tune during burn-in only, then freeze
                 burn[t] = x
                 log_scale += (acceptance[t] - self.target_acceptance) / (t + 1) ** 0.6
                 new = self._shape(burn[t // 2: t + 1], hi - lo) if t >= 50 and t % 25 == 0 else None
@@ -121,14 +124,12 @@ class MetropolisHastings(Sampler):
                     chol = new
                     if not shaped:  # leaving the initial kernel: optimal Gaussian scale
                         log_scale, shaped = np.log(2.38 / np.sqrt(d)), True
-            if k < kept_steps.size and t == kept_steps[k]:
-                kept_x[k], kept_lp[k] = x, lp
-                k += 1
+            kept.record(t, x, lp)
             run.step(t, np.nan, acceptance=float(acceptance[t]), proposal_scale=float(scale))
-        return run.finish(kept_x.reshape(-1, d), kept_lp.reshape(-1), None, sampler=self.name,
-                          config=self.get_config(), seed=seed,
-                          extra_vars={"acceptance": (("step",), acceptance),
-                                      "proposal_scale": (("step",), scales)})
+        theta, log_target, _ = kept.flat()
+        return run.finish(theta, log_target, None, sampler=self.name, config=self.get_config(),
+                          seed=seed, extra_vars={"acceptance": (("step",), acceptance),
+                                                 "proposal_scale": (("step",), scales)})
 
     @staticmethod
     def _shape(states: np.ndarray, width: np.ndarray) -> np.ndarray | None:

@@ -43,30 +43,149 @@ evaluates the full target at its best particle under ``G^n`` (one evaluation,
 
 from __future__ import annotations
 
-from typing import ClassVar
+from collections.abc import Callable
+from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 import xarray as xr
 
-from mrfpe.posterior import ess, normalise_log_weights
-from mrfpe.resampling import METHODS
-from mrfpe.resampling import resample as _resample
-from mrfpe.samplers.base import Sampler, check_choice, check_positive_int, check_range
+from mrfpe.samplers.base import Callback, Sampler, check_choice, check_positive_int, check_range
 from mrfpe.samplers.kit import (
+    RESAMPLING_METHODS,
     THESIS_POWER,
+    History,
     Run,
+    check_bool,
     check_seed,
     check_target,
+    ess,
     grid,
     jitter,
     log_kernel_mass,
     log_mixture_density,
     log_ratio,
+    normalise_log_weights,
     partition_or_none,
+    resample,
     softened,
 )
 
-__all__ = ["PMC", "THESIS_POWER"]
+__all__ = ["PMC", "THESIS_POWER", "Context", "PMCState", "final_log_weight", "init_state",
+           "mixture_step", "thesis1_step", "thesis2_step"]
+
+
+class Context(NamedTuple):
+    """What a step reads but never changes: the run log, the random stream and the box."""
+
+    run: Run
+    rng: np.random.Generator
+    bounds: np.ndarray
+
+
+class PMCState(NamedTuple):
+    """The particle set after an iteration (immutable; each step returns a new one).
+
+    Attributes
+    ----------
+    x : (N, d) particles.
+    log_weight : (N,) their weights under this iteration (mixture: ``l·log G^n − log q^n``;
+        PMC (II): ``log c^n``, 6.67; PMC (I): ``log π^n``, 6.66).
+    log_den : what the full target is divided by for the final weights
+        (``log q^n``, ``log G^n``), or None for the target itself (mixture, iteration 0).
+    power : the softening power in use (mixture ``"auto"`` anneals it).
+    resampled : whether this iteration resampled (mixture with ``ess_threshold``).
+    log_target : full target at ``x`` when the step evaluated it (PMC (I)), else None.
+    x_next, log_target_next : PMC (I)'s step-3 resampled set, the next iteration's input.
+    """
+
+    x: np.ndarray
+    log_weight: np.ndarray | None = None
+    log_den: np.ndarray | None = None
+    power: float | str = THESIS_POWER
+    resampled: bool = True
+    log_target: np.ndarray | None = None
+    x_next: np.ndarray | None = None
+    log_target_next: np.ndarray | None = None
+
+
+def init_state(x: np.ndarray, power: float | str) -> PMCState:
+    """The state before iteration 0: the initial set ``x`` (the grid), nothing weighted yet."""
+    return PMCState(x=x, power=power)
+
+
+def final_log_weight(state: PMCState, log_target: np.ndarray) -> np.ndarray:
+    """The final reweighting with the full target: ``log ϱ(x) − log_den``."""
+    return log_target if state.log_den is None else log_ratio(log_target, state.log_den)
+
+
+# Each step maps (config, context, state, iteration n, importance function G^n) to the new
+# state and the G^n values at the new particles (for the cheap MAP candidate).
+Step = Callable[[Any, Context, PMCState, int, Any], tuple[PMCState, np.ndarray]]
+
+
+def mixture_step(pmc: PMC, ctx: Context, state: PMCState, n: int,
+                 g: Any) -> tuple[PMCState, np.ndarray]:
+    """Cappé et al.'s PMC: resample, jitter, weight ``G^n / q^n`` (deterministic mixture)."""
+    run, x = ctx.run, state.x
+    if n == 0:  # evenly spaced grid represents the uniform proposal: weight = G^0
+        raw = run.evaluate(g, x)
+        power, lw = pmc._soften(raw, 0.0, 0.0)
+        return state._replace(log_weight=lw, power=power, log_den=None), raw
+    lw_prev = state.log_weight
+    sigma = pmc._kernel(n, x, lw_prev)
+    ok = pmc.ess_threshold is None or ess(lw_prev) < pmc.ess_threshold * lw_prev.size
+    idx = (resample(lw_prev, pmc.n_samples, pmc.resampling, ctx.rng) if ok
+           else np.arange(x.shape[0]))
+    anc, counts = np.unique(idx, return_counts=True)
+    x_new = jitter(x[idx], sigma, ctx.bounds, ctx.rng)
+    log_w = np.log(counts / idx.size) - log_kernel_mass(x[anc], sigma, ctx.bounds)
+    lq = log_mixture_density(x_new, x[anc], log_w, sigma)
+    raw = run.evaluate(g, x_new)
+    power, lw = pmc._soften(raw, lq, state.power)
+    return PMCState(x=x_new, log_weight=lw, log_den=lq, power=power, resampled=bool(ok)), raw
+
+
+def thesis2_step(cfg: Any, ctx: Context, state: PMCState, n: int,
+                 g: Any) -> tuple[PMCState, np.ndarray]:
+    """PMC (II), 6.6.2: ``w = c^{n-1} G^n(a^{n-1})`` (6.67), resample with jitter,
+    ``c^n = 1 / G^n(a^n)``; the set keeps representing the uniform distribution.
+
+    ``cfg`` provides ``n_samples``, ``resampling`` and ``sigma(n)`` (PMC and PPF do).
+    """
+    run, x = ctx.run, state.x
+    w = run.evaluate(g, x)  # u^0 grid weighted by G^0 (6.6.2, n = 0, step 1)
+    if n > 0:
+        w = state.log_weight + w  # 6.67
+    idx = resample(w, cfg.n_samples, cfg.resampling, ctx.rng)
+    a = jitter(x[idx], cfg.sigma(n), ctx.bounds, ctx.rng)
+    lg = run.evaluate(g, a)
+    lc = log_ratio(0.0, lg)  # c^n = 1/G^n(a^n), zero where G^n = 0
+    return state._replace(x=a, log_weight=lc, log_den=lg), lg
+
+
+def thesis1_step(cfg: Any, ctx: Context, state: PMCState, n: int,
+                 g: Any) -> tuple[PMCState, np.ndarray]:
+    """PMC (I), 6.6.1: ``v = π^{n-1} G^n(θ^{n-1}) / ePL(θ^{n-1})`` (6.66), resample with
+    jitter, ``π^n = ePL(θ^n) / G^n(θ^n)``, resample again (step 3)."""
+    run = ctx.run
+    x = state.x if state.x_next is None else state.x_next  # previous step-3 resampled set
+    if n == 0:  # v^0 = G^0(u^0) on the grid
+        v = run.evaluate(g, x)
+    else:  # π^{n-1} equal after resampling
+        v = log_ratio(run.evaluate(g, x), state.log_target_next)
+    idx = resample(v, cfg.n_samples, cfg.resampling, ctx.rng)
+    th = jitter(x[idx], cfg.sigma(n), ctx.bounds, ctx.rng)
+    lg = run.evaluate(g, th)
+    lt = run.evaluate(run.target, th)
+    run.offer(th, lt)
+    lpi = log_ratio(lt, lg)
+    res = resample(lpi, cfg.n_samples, cfg.resampling, ctx.rng)
+    return state._replace(x=th, log_weight=lpi, log_den=lg, log_target=lt, x_next=th[res],
+                          log_target_next=lt[res]), lg
+
+
+STEPS: dict[str, Step] = {"mixture": mixture_step, "thesis2": thesis2_step,
+                          "thesis1": thesis1_step}
 
 
 class PMC(Sampler):
@@ -126,16 +245,14 @@ class PMC(Sampler):
                              f"variants use the spherical σ_n); got variant={variant!r}")
         if resampling is None:
             resampling = "systematic" if variant == "mixture" else "multinomial"
-        self.resampling = check_choice("resampling", resampling, METHODS)
+        self.resampling = check_choice("resampling", resampling, RESAMPLING_METHODS)
         if ess_threshold is not None:
             ess_threshold = check_range("ess_threshold", ess_threshold, 0.0, 1.0)
             if variant != "mixture":
                 raise ValueError("ess_threshold applies to variant='mixture' only (the thesis "
                                  f"variants resample every iteration); got variant={variant!r}")
         self.ess_threshold = ess_threshold
-        if not isinstance(keep_history, bool | np.bool_):
-            raise ValueError(f"keep_history must be a bool; got {keep_history!r}")
-        self.keep_history = bool(keep_history)
+        self.keep_history = check_bool("keep_history", keep_history)
 
     # -- helpers -------------------------------------------------------------
     def _importance_functions(self, target) -> list:
@@ -170,7 +287,8 @@ class PMC(Sampler):
             lo, hi = (mid, hi) if ess(weights(np.exp(mid))) >= goal else (lo, mid)
         return float(np.exp(lo)), weights(float(np.exp(lo)))
 
-    def _sigma(self, n: int) -> float:
+    def sigma(self, n: int) -> float:
+        """The thesis's jitter schedule ``σ_n = σ₀ (1 − n/T)`` (6.6)."""
         return self.sigma0 * (1.0 - n / self.n_iterations)
 
     def _kernel(self, n: int, x: np.ndarray, lw: np.ndarray) -> float | np.ndarray:
@@ -178,7 +296,7 @@ class PMC(Sampler):
         per parameter ``min(σ_n, h · sd_j)`` with ``sd_j`` the weighted sd of the cloud
         and ``h = (4/((d+2) N))^{1/(d+4)}`` (Silverman's factor), so the kernel shrinks
         in directions the target already pins down."""
-        sigma = self._sigma(n)
+        sigma = self.sigma(n)
         if self.kernel == "isotropic":
             return sigma
         w = np.exp(normalise_log_weights(lw))
@@ -187,97 +305,30 @@ class PMC(Sampler):
         h = (4.0 / ((d + 2) * x.shape[0])) ** (1.0 / (d + 4))
         return np.clip(h * sd, 1e-6 * sigma, sigma)
 
-    def _jitter(self, x: np.ndarray, idx: np.ndarray, sigma, rng) -> np.ndarray:
-        return jitter(x[idx], sigma, self._bounds, rng)
-
     # -- run -----------------------------------------------------------------
-    def run(self, target, *, seed: int | None = None, progress: bool = False,
-            callback=None) -> xr.Dataset:
+    def run(self, target: Any, *, seed: int | None = None, progress: bool = False,
+            callback: Callback | None = None) -> xr.Dataset:
         """Sample ``target``; returns the posterior Dataset (DESIGN.md)."""
-        bounds = self._bounds = check_target(target)
+        bounds = check_target(target)
         check_seed(seed)
-        rng = np.random.default_rng(seed)
         G = self._importance_functions(target)
-        T, N = self.n_iterations, self.n_samples
+        T = self.n_iterations
         run = Run(target, T, progress=progress, callback=callback, desc=f"pmc/{self.variant}")
-        hist_x, hist_w = [], []
-        step = {"mixture": self._mixture_step, "thesis2": self._thesis2_step,
-                "thesis1": self._thesis1_step}[self.variant]
-        state: dict = {"x": grid(bounds, N)}
+        ctx = Context(run, np.random.default_rng(seed), bounds)
+        step, history = STEPS[self.variant], History(self.keep_history)
+        state = init_state(grid(bounds, self.n_samples), self.power)
         for n in range(T):
-            g = G[n % len(G)]
-            lw, lg = step(n, g, state, run, rng)
-            last = n == T - 1
-            if last:  # final reweighting with the full target
-                lt = state["lt"] if "lt" in state else run.evaluate(target, state["x"])
-                lw = state["final"](lt)
-                run.offer(state["x"], lt)
+            state, lg = step(self, ctx, state, n, G[n % len(G)])
+            lw = state.log_weight
+            if n == T - 1:  # final reweighting with the full target
+                lt = state.log_target
+                lt = run.evaluate(target, state.x) if lt is None else lt
+                lw = final_log_weight(state, lt)
+                run.offer(state.x, lt)
             elif self.variant != "thesis1":  # thesis1 already offered full-target values
-                run.offer_candidate(state["x"], lg)
-            if self.keep_history:
-                hist_x.append(state["x"].copy())
-                hist_w.append(normalise_log_weights(lw))
-            run.step(n, ess(lw), sigma=self._sigma(n), resampled=state.get("resampled", True),
-                     power=state.get("power", self.power))
-        hx = np.asarray(hist_x) if self.keep_history else None
-        hw = np.asarray(hist_w) if self.keep_history else None
-        return run.finish(state["x"], lt, lw, sampler=self.name, config=self.get_config(),
-                          seed=seed, history_theta=hx, history_log_weight=hw)
-
-    # Each step updates ``state["x"]`` (the particles after iteration n), stores in
-    # ``state["final"]`` how full-target values become final log weights, and returns
-    # (log weights of the set under this iteration, G^n values used for the MAP candidate).
-    def _mixture_step(self, n, g, state, run, rng):
-        x = state["x"]
-        state.pop("lt", None)
-        if n == 0:  # evenly spaced grid represents the uniform proposal: weight = G^0
-            raw = run.evaluate(g, x)
-            state["power"], lw = self._soften(raw, 0.0, 0.0)
-            state.update(lw=lw, final=lambda lt: lt)
-            return lw, raw
-        lw_prev = state["lw"]
-        sigma = self._kernel(n, x, lw_prev)
-        ok = (self.ess_threshold is None
-              or ess(lw_prev) < self.ess_threshold * lw_prev.size)
-        idx = _resample(lw_prev, self.n_samples, self.resampling, rng) if ok else \
-            np.arange(x.shape[0])
-        state["resampled"] = bool(ok)
-        anc, counts = np.unique(idx, return_counts=True)
-        x_new = self._jitter(x, idx, sigma, rng)
-        log_w = np.log(counts / idx.size) - log_kernel_mass(x[anc], sigma, self._bounds)
-        lq = log_mixture_density(x_new, x[anc], log_w, sigma)
-        raw = run.evaluate(g, x_new)
-        state["power"], lw = self._soften(raw, lq, state["power"])
-        state.update(x=x_new, lw=lw, final=lambda lt: log_ratio(lt, lq))
-        return lw, raw
-
-    def _thesis2_step(self, n, g, state, run, rng):
-        x = state["x"]
-        if n == 0:  # u^0 grid weighted by G^0 (6.6.2, n = 0, step 1)
-            w = run.evaluate(g, x)
-        else:  # 6.67: w = c^{n-1} G^n(a^{n-1})
-            w = state["lc"] + run.evaluate(g, x)
-        idx = _resample(w, self.n_samples, self.resampling, rng)
-        a = self._jitter(x, idx, self._sigma(n), rng)
-        lg = run.evaluate(g, a)
-        lc = log_ratio(0.0, lg)  # c^n = 1/G^n(a^n), zero where G^n = 0
-        state.update(x=a, lc=lc, final=lambda lt: log_ratio(lt, lg))
-        return lc, lg
-
-    def _thesis1_step(self, n, g, state, run, rng):
-        x = state.get("x_next", state["x"])  # the resampled set of the previous iteration
-        if n == 0:  # v^0 = G^0(u^0) on the grid
-            v = run.evaluate(g, x)
-        else:  # 6.66: v = π^{n-1} G^n(θ^{n-1}) / ePL(θ^{n-1}); π^{n-1} equal after resampling
-            lt_prev = state["lt_res"]
-            v = log_ratio(run.evaluate(g, x), lt_prev)
-        idx = _resample(v, self.n_samples, self.resampling, rng)
-        th = self._jitter(x, idx, self._sigma(n), rng)
-        lg = run.evaluate(g, th)
-        lt = run.evaluate(run.target, th)
-        run.offer(th, lt)
-        lpi = log_ratio(lt, lg)
-        # step 3: {θ^n, π^n} = resampleParticles({θ^n, π^n}) — kept as the next input
-        res = _resample(lpi, self.n_samples, self.resampling, rng)
-        state.update(x=th, x_next=th[res], lt=lt, lt_res=lt[res], final=lambda _lt: lpi)
-        return lpi, lg
+                run.offer_candidate(state.x, lg)
+            history.record(state.x, lw)
+            run.step(n, ess(lw), sigma=self.sigma(n), resampled=state.resampled,
+                     power=state.power)
+        return run.finish(state.x, lt, lw, sampler=self.name, config=self.get_config(),
+                          seed=seed, **history.build_kwargs())

@@ -24,26 +24,26 @@ particle under ``g^n``; all particles at the end).
 
 from __future__ import annotations
 
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 import xarray as xr
 
-from mrfpe.posterior import ess, normalise_log_weights
-from mrfpe.resampling import METHODS
-from mrfpe.resampling import resample as _resample
-from mrfpe.samplers.base import Sampler, check_choice, check_positive_int, check_range
+from mrfpe.samplers.base import Callback, Sampler, check_choice, check_positive_int, check_range
 from mrfpe.samplers.kit import (
+    RESAMPLING_METHODS,
     THESIS_POWER,
+    History,
     Run,
+    check_bool,
     check_seed,
     check_target,
+    ess,
     grid,
-    jitter,
-    log_ratio,
     partition_or_none,
     softened,
 )
+from mrfpe.samplers.pmc import Context, final_log_weight, init_state, thesis2_step
 
 __all__ = ["PPF"]
 
@@ -71,40 +71,36 @@ class PPF(Sampler):
         self.partition = check_choice("partition", partition, ("strided", "block"))
         self.power = check_range("power", power, 0.0, np.inf, low_open=True, high_open=True)
         self.sigma0 = check_range("sigma0", sigma0, 0.0, np.inf, low_open=True, high_open=True)
-        self.resampling = check_choice("resampling", resampling, METHODS)
-        if not isinstance(keep_history, bool | np.bool_):
-            raise ValueError(f"keep_history must be a bool; got {keep_history!r}")
-        self.keep_history = bool(keep_history)
+        self.resampling = check_choice("resampling", resampling, RESAMPLING_METHODS)
+        self.keep_history = check_bool("keep_history", keep_history)
 
-    def run(self, target, *, seed: int | None = None, progress: bool = False,
-            callback=None) -> xr.Dataset:
+    def sigma(self, n: int) -> float:
+        """Jitter of partition n: ``σ_n = σ₀ (1 − n/P)``."""
+        return self.sigma0 * (1.0 - n / self.n_partitions)
+
+    def run(self, target: Any, *, seed: int | None = None, progress: bool = False,
+            callback: Callback | None = None) -> xr.Dataset:
         """Sample ``target``; returns the posterior Dataset (DESIGN.md)."""
         bounds = check_target(target)
         check_seed(seed)
-        rng = np.random.default_rng(seed)
-        P, N = self.n_partitions, self.n_samples
+        P = self.n_partitions
         parts = partition_or_none(target, self.k, self.partition) or [target]
         G = [softened(p, self.power) for p in parts]
         run = Run(target, P, progress=progress, callback=callback, desc="ppf")
-        x, lw = grid(bounds, N), np.zeros(N)  # p(X^0): uniform, equal weights
-        hist_x, hist_w = [], []
+        ctx = Context(run, np.random.default_rng(seed), bounds)
+        state = init_state(grid(bounds, self.n_samples), self.power)  # p(X^0): uniform
+        history = History(self.keep_history)
         for n in range(P):
-            g = G[n % len(G)]
-            lw = lw + run.evaluate(g, x)  # 5.33
-            idx = _resample(lw, N, self.resampling, rng)
-            x = jitter(x[idx], self.sigma0 * (1.0 - n / P), bounds, rng)
-            lg = run.evaluate(g, x)
-            lw = log_ratio(0.0, lg)  # 5.34 after resampling's equal weights
+            # 5.33 (π ← π g^n), resample with noise, 5.34 (π ← π / g^n): PMC (II)'s step
+            state, lg = thesis2_step(self, ctx, state, n, G[n % len(G)])
+            lw = state.log_weight
             if n == P - 1:
-                lt = run.evaluate(target, x)
-                lw = log_ratio(lt, lg)  # 5.35: π ← π ϱ(x)
-                run.offer(x, lt)
+                lt = run.evaluate(target, state.x)
+                lw = final_log_weight(state, lt)  # 5.35: π ← π ϱ(x)
+                run.offer(state.x, lt)
             else:
-                run.offer_candidate(x, lg)
-            if self.keep_history:
-                hist_x.append(x.copy())
-                hist_w.append(normalise_log_weights(lw))
-            run.step(n, ess(lw), sigma=self.sigma0 * (1.0 - n / P))
-        return run.finish(x, lt, lw, sampler=self.name, config=self.get_config(), seed=seed,
-                          history_theta=np.asarray(hist_x) if self.keep_history else None,
-                          history_log_weight=np.asarray(hist_w) if self.keep_history else None)
+                run.offer_candidate(state.x, lg)
+            history.record(state.x, lw)
+            run.step(n, ess(lw), sigma=self.sigma(n))
+        return run.finish(state.x, lt, lw, sampler=self.name, config=self.get_config(),
+                          seed=seed, **history.build_kwargs())

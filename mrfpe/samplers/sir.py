@@ -26,24 +26,26 @@ The MAP trace is best-so-far under the full target.
 
 from __future__ import annotations
 
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 import xarray as xr
 
-from mrfpe.posterior import ess, normalise_log_weights
-from mrfpe.resampling import METHODS
-from mrfpe.resampling import resample as _resample
-from mrfpe.samplers.base import Sampler, check_choice, check_positive_int, check_range
+from mrfpe.samplers.base import Callback, Sampler, check_choice, check_positive_int, check_range
 from mrfpe.samplers.kit import (
+    RESAMPLING_METHODS,
     THESIS_POWER,
+    History,
     Run,
+    check_bool,
     check_seed,
     check_target,
+    ess,
     grid,
     jitter,
     log_ratio,
     partition_or_none,
+    resample,
     softened,
 )
 
@@ -64,50 +66,55 @@ class SIR(Sampler):
         self.n_iterations = check_positive_int("n_iterations", n_iterations, 1)
         self.variant = check_choice("variant", variant, ("classic", "alternative"))
         self.sigma0 = check_range("sigma0", sigma0, 0.0, np.inf, low_open=True, high_open=True)
-        self.resampling = check_choice("resampling", resampling, METHODS)
+        self.resampling = check_choice("resampling", resampling, RESAMPLING_METHODS)
         self.k = check_positive_int("k", k, 1)
         self.partition = check_choice("partition", partition, ("strided", "block"))
         self.power = check_range("power", power, 0.0, np.inf, low_open=True, high_open=True)
-        if not isinstance(keep_history, bool | np.bool_):
-            raise ValueError(f"keep_history must be a bool; got {keep_history!r}")
-        self.keep_history = bool(keep_history)
+        self.keep_history = check_bool("keep_history", keep_history)
 
-    def _sigma(self, t: int) -> float:
+    def sigma(self, t: int) -> float:
+        """Jitter of step t: ``σ_t = σ₀ (1 − t/T)``."""
         return self.sigma0 * (1.0 - t / self.n_iterations)
 
-    def run(self, target, *, seed: int | None = None, progress: bool = False,
-            callback=None) -> xr.Dataset:
+    def run(self, target: Any, *, seed: int | None = None, progress: bool = False,
+            callback: Callback | None = None) -> xr.Dataset:
         """Sample ``target``; returns the posterior Dataset (DESIGN.md)."""
         bounds = check_target(target)
         check_seed(seed)
         rng = np.random.default_rng(seed)
-        T, N = self.n_iterations, self.n_samples
-        run = Run(target, T, progress=progress, callback=callback, desc=f"sir/{self.variant}")
-        u = grid(bounds, N)
-        if self.variant == "alternative":
-            parts = partition_or_none(target, self.k, self.partition) or [target]
-            G = [softened(p, self.power) for p in parts]
-            g_grid = [run.evaluate(g, u) for g in G]  # 5.29 on the fixed set: once per g
-        hist_x, hist_w = [], []
-        x, lw = u, np.zeros(N)
-        for t in range(T):
-            if self.variant == "classic":
-                if t > 0:  # g^t: resample (5.28) then diffuse
-                    idx = _resample(lw, N, self.resampling, rng)
-                    x = jitter(x[idx], self._sigma(t), bounds, rng)
-                lt = run.evaluate(target, x)
-                lw = lt / T  # 5.26 with the bootstrap proposal: ϱ^{1/T}; -inf stays -inf
-            else:
-                g = G[t % len(G)]
-                idx = _resample(g_grid[t % len(G)], N, self.resampling, rng)  # step 3
-                x = jitter(u[idx], self._sigma(t), bounds, rng)
-                lt = run.evaluate(target, x)
-                lw = log_ratio(lt, run.evaluate(g, x))  # 5.30
+        run = Run(target, self.n_iterations, progress=progress, callback=callback,
+                  desc=f"sir/{self.variant}")
+        step = self._classic_step if self.variant == "classic" else self._alternative_step(
+            target, run, grid(bounds, self.n_samples))
+        history = History(self.keep_history)
+        x, lw = grid(bounds, self.n_samples), np.zeros(self.n_samples)
+        for t in range(self.n_iterations):
+            x, lt, lw = step(t, x, lw, target, run, rng, bounds)
             run.offer(x, lt)
-            if self.keep_history:
-                hist_x.append(x.copy())
-                hist_w.append(normalise_log_weights(lw))
-            run.step(t, ess(lw), sigma=self._sigma(t))
+            history.record(x, lw)
+            run.step(t, ess(lw), sigma=self.sigma(t))
         return run.finish(x, lt, lw, sampler=self.name, config=self.get_config(), seed=seed,
-                          history_theta=np.asarray(hist_x) if self.keep_history else None,
-                          history_log_weight=np.asarray(hist_w) if self.keep_history else None)
+                          **history.build_kwargs())
+
+    def _classic_step(self, t, x, lw, target, run, rng, bounds):
+        """5.25–5.28: resample (5.28), diffuse, weight by ``ϱ^{1/T}`` (5.26, bootstrap)."""
+        if t > 0:
+            idx = resample(lw, self.n_samples, self.resampling, rng)
+            x = jitter(x[idx], self.sigma(t), bounds, rng)
+        lt = run.evaluate(target, x)
+        return x, lt, lt / self.n_iterations  # -inf stays -inf
+
+    def _alternative_step(self, target, run, u):
+        """5.29–5.31 on the fixed set ``u``: ``g^t`` evaluated there once per function."""
+        parts = partition_or_none(target, self.k, self.partition) or [target]
+        G = [softened(p, self.power) for p in parts]
+        g_grid = [run.evaluate(g, u) for g in G]  # 5.29 on the fixed set: once per g
+
+        def step(t, x, lw, target, run, rng, bounds):
+            i = t % len(G)
+            idx = resample(g_grid[i], self.n_samples, self.resampling, rng)  # step 3
+            x = jitter(u[idx], self.sigma(t), bounds, rng)
+            lt = run.evaluate(target, x)
+            return x, lt, log_ratio(lt, run.evaluate(G[i], x))  # 5.30
+
+        return step

@@ -10,14 +10,29 @@ A plugin sampler written with the kit looks exactly like a built-in one::
     x = kit.grid(bounds, n)                 # or kit.draw_in_support(...)
     lw = run.evaluate(target, x)            # counted, NaN -> -inf
     idx = kit.resample(lw, n, "systematic", rng)
-    ...
-    return run.finish(x, lt, lw, sampler=..., config=..., seed=seed)
+    history = kit.History(keep_history)     # optional per-step record
+    for step in range(n_steps):
+        ...
+        history.record(x, lw)
+        run.step(step, kit.ess(lw))          # MAP/ESS trace, progress bar, callback
+    return run.finish(x, lt, lw, sampler=..., config=..., seed=seed,
+                      **history.build_kwargs())
+
+A complete weighted sampler on the kit is the worked example of
+``docs/samplers.md`` (tested in CI as documentation). Everything here is
+public and stable; plugins should import nothing else from mrfpe but
+:mod:`mrfpe.samplers.base` (the optional :class:`~mrfpe.samplers.base.Sampler`
+base class) and :mod:`mrfpe.posterior`.
 
 Contents
 --------
 Run log
     :class:`Run` (evaluation counting, MAP trace, ESS trace, progress bar,
-    callback, posterior assembly).
+    callback, posterior assembly; :meth:`Run.finish` forwards any further
+    :func:`mrfpe.posterior.build` keyword: the diagnostics hook).
+Records
+    :class:`History` (every step's weighted set, for ``keep_history``),
+    :class:`KeptStates` (an MCMC run's post-burn-in, thinned states).
 Validators
     :func:`check_target`, :func:`check_seed`, :func:`check_positive_int`,
     :func:`check_range`, :func:`check_choice`, :func:`check_bool`,
@@ -39,8 +54,9 @@ from __future__ import annotations
 from mrfpe.mixture import log_mixture_density
 from mrfpe.resampling import METHODS as RESAMPLING_METHODS
 from mrfpe.resampling import ess, log_ratio, normalise_log_weights, perplexity, resample
-from mrfpe.samplers.kit.chains import check_chain_length
+from mrfpe.samplers.kit.chains import KeptStates, check_chain_length
 from mrfpe.samplers.kit.draws import draw_in_support, grid
+from mrfpe.samplers.kit.history import History
 from mrfpe.samplers.kit.importance import THESIS_POWER, partition_or_none, softened
 from mrfpe.samplers.kit.jitter import jitter, log_kernel_mass
 from mrfpe.samplers.kit.runlog import Run
@@ -54,8 +70,9 @@ from mrfpe.validation import (
 )
 
 __all__ = [
-    "RESAMPLING_METHODS", "THESIS_POWER", "Run", "check_bool", "check_chain_length",
-    "check_choice", "check_positive_int", "check_range", "check_seed", "check_target",
+    "RESAMPLING_METHODS", "THESIS_POWER", "History", "KeptStates", "Run", "check_bool",
+    "check_chain_length", "check_choice", "check_positive_int", "check_range", "check_seed",
+    "check_target",
     "draw_in_support", "ess", "grid", "jitter", "log_kernel_mass", "log_mixture_density",
     "log_ratio", "normalise_log_weights", "partition_or_none", "perplexity", "resample",
     "softened",

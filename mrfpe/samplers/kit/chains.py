@@ -1,12 +1,14 @@
-"""What only chains need: chain-length and thinning checks."""
+"""What only chains need: chain-length checks and the kept (post-burn-in, thinned) states."""
 
 from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
 from mrfpe.validation import check_positive_int
 
-__all__ = ["check_chain_length"]
+__all__ = ["KeptStates", "check_chain_length"]
 
 
 def check_chain_length(n_steps: Any, burn_in: Any, thin: Any) -> tuple[int, int, int]:
@@ -16,3 +18,51 @@ def check_chain_length(n_steps: Any, burn_in: Any, thin: Any) -> tuple[int, int,
     if burn_in_ >= n_steps:
         raise ValueError(f"burn_in must be < n_steps ({n_steps}); got {burn_in}")
     return n_steps, burn_in_, check_positive_int("thin", thin)
+
+
+class KeptStates:
+    """The sample set of an MCMC run: every ``thin``-th state after ``burn_in``, all chains.
+
+    >>> kept = KeptStates(n_steps, burn_in, thin, n_chains, d)      # doctest: +SKIP
+    >>> for t in range(n_steps):                                    # doctest: +SKIP
+    ...     ...
+    ...     kept.record(t, x, lp)            # no-op on steps that are not kept
+    >>> theta, log_target, log_weight = kept.flat()                 # doctest: +SKIP
+
+    Attributes
+    ----------
+    steps : (K,) the kept step indices.
+    theta : (K, C, d); log_target, log_weight : (K, C) — filled by :meth:`record`
+        (``log_weight`` only when ``weighted``).
+    """
+
+    def __init__(self, n_steps: int, burn_in: int, thin: int, n_chains: int, d: int, *,
+                 weighted: bool = False):
+        self.steps = np.arange(burn_in, n_steps, thin)
+        k = self.steps.size
+        self.theta = np.empty((k, n_chains, d))
+        self.log_target = np.empty((k, n_chains))
+        self.log_weight = np.empty((k, n_chains)) if weighted else None
+        self._k = 0
+
+    def record(self, t: int, theta: np.ndarray, log_target: np.ndarray,
+               log_weight: np.ndarray | None = None) -> bool:
+        """Store the chains' states if step ``t`` is kept; return whether it was."""
+        k = self._k
+        if k >= self.steps.size or t != self.steps[k]:
+            return False
+        self.theta[k], self.log_target[k] = theta, log_target
+        if self.log_weight is not None:
+            self.log_weight[k] = log_weight
+        self._k += 1
+        return True
+
+    def flat(self) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """``(theta (S, d), log_target (S,), log_weight (S,) or None)``, S = K·C, step-major."""
+        d = self.theta.shape[-1]
+        lw = None if self.log_weight is None else self.log_weight.reshape(-1)
+        return self.theta.reshape(-1, d), self.log_target.reshape(-1), lw
+
+    def chain(self) -> np.ndarray:
+        """(S,) chain index of each flattened sample (for per-chain diagnostics)."""
+        return np.tile(np.arange(self.theta.shape[1]), self.steps.size)

@@ -94,11 +94,19 @@ class Run:
                                       "map_theta": self.best_theta.copy(),
                                       "n_target_evals": self.n_evals, **info})
 
-    def finish(self, theta: np.ndarray, log_target: np.ndarray, log_weight: np.ndarray, *,
-               sampler: str, config: dict, seed: int | None,
-               history_theta: Any = None, history_log_weight: Any = None,
-               extra_vars: dict | None = None) -> xr.Dataset:
-        """Close the bar and build the posterior Dataset."""
+    def finish(self, theta: np.ndarray, log_target: np.ndarray, log_weight: np.ndarray | None,
+               *, sampler: str, config: dict, seed: int | None, **build_kwargs: Any,
+               ) -> xr.Dataset:
+        """Close the bar and build the posterior Dataset.
+
+        The run's own records (MAP trace, ESS trace, evaluation count, wall
+        time, target) are passed to :func:`mrfpe.posterior.build` together with
+        ``build_kwargs`` — ``history_theta``/``history_log_weight`` (see
+        :meth:`History.build_kwargs <mrfpe.samplers.kit.History.build_kwargs>`),
+        ``extra_vars``, ``extra_attrs`` (e.g. a ``log_evidence``) and whatever
+        options ``build`` accepts (per-sample chain ids, diagnostics). This is
+        the diagnostics hook: every sampler's posterior passes through here.
+        """
         if self._bar is not None:
             self._bar.close()
         mt = np.asarray(self.map_theta)
@@ -107,7 +115,6 @@ class Run:
             mt = np.where(np.isnan(mt), first, mt)
         return build(theta, log_target, param_names=self.target.param_names,
                      log_weight=log_weight, map_theta=mt, map_log_target=self.map_log_target,
-                     ess=self.ess, history_theta=history_theta,
-                     history_log_weight=history_log_weight, sampler=sampler, config=config,
-                     seed=seed, target=self.target, n_target_evals=self.n_evals,
-                     wall_time_s=time.perf_counter() - self.t0, extra_vars=extra_vars)
+                     ess=self.ess, sampler=sampler, config=config, seed=seed,
+                     target=self.target, n_target_evals=self.n_evals,
+                     wall_time_s=time.perf_counter() - self.t0, **build_kwargs)

@@ -34,4 +34,9 @@ def test_uses_only_public_api():
     mods = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module}
     mods |= {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
     ours = {m for m in mods if m.split(".")[0] == "mrfpe"}
-    assert ours <= {"mrfpe.posterior", "mrfpe.samplers.base"}, ours
+    assert ours <= {"mrfpe.posterior", "mrfpe.samplers", "mrfpe.samplers.kit",
+                    "mrfpe.samplers.base"}, ours
+    names = {f"{n.module}.{a.name}" for n in ast.walk(tree)
+             if isinstance(n, ast.ImportFrom) and (n.module or "").startswith("mrfpe")
+             for a in n.names}
+    assert not any(part.startswith("_") for m in ours | names for part in m.split(".")), names

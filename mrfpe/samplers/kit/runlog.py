@@ -28,13 +28,13 @@ class Run:
     Parameters
     ----------
     target : the full target (its values define the MAP trace).
-    n_steps : number of steps, for the progress bar.
+    n_steps : number of steps, for the progress bar (None when not known in advance).
     progress : show a tqdm bar (stderr) with the step's ESS and extra info.
     callback : ``callback(step, info)`` after each step; ``info`` holds ``ess``,
         ``map_log_target``, ``n_target_evals`` and the sampler's extras.
     """
 
-    def __init__(self, target: Any, n_steps: int, *, progress: bool = False,
+    def __init__(self, target: Any, n_steps: int | None, *, progress: bool = False,
                  callback: Callable[[int, dict], Any] | None = None, desc: str = ""):
         if callback is not None and not callable(callback):
             raise ValueError(f"callback must be callable or None; got {callback!r}")

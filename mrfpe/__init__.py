@@ -19,16 +19,29 @@ _SUBMODULES = {
 }
 
 
-def sample(name: str, target: Any, *, seed: int | None = None, progress: bool = False,
+def sample(sampler: Any, target: Any, *, seed: int | None = None, progress: bool = False,
            callback: Any = None, **config: Any):
-    """Run sampler ``name`` on ``target`` and return its posterior Dataset.
+    """Run a sampler on ``target`` and return its posterior Dataset.
 
-    ``config`` holds the sampler's keyword settings, e.g.
-    ``mrfpe.sample("pmc", target, seed=0, n_samples=1000, n_iterations=20)``.
+    ``sampler`` is a registered name (``mrfpe samplers`` lists them), a sampler
+    class (registered or not) or an already configured instance. ``config``
+    holds the keyword settings for a name or a class, e.g.
+    ``mrfpe.sample("pmc", target, seed=0, n_samples=1000, n_iterations=20)``;
+    an instance carries its own (passing ``config`` with one is a ``TypeError``).
     """
-    from mrfpe.samplers import get
+    import inspect
 
-    return get(name)(**config).run(target, seed=seed, progress=progress, callback=callback)
+    from mrfpe.samplers import get, validate_sampler
+
+    if isinstance(sampler, str) or inspect.isclass(sampler):
+        instance = get(sampler)(**config)
+    else:
+        validate_sampler(type(sampler))
+        if config:
+            raise TypeError(f"configuration {sorted(config)} given with an already constructed "
+                            f"sampler {sampler!r}; pass the class or a name instead")
+        instance = sampler
+    return instance.run(target, seed=seed, progress=progress, callback=callback)
 
 
 def distance(name: str, a: Any, b: Any, **params: Any) -> float:

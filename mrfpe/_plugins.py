@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import importlib.metadata as md
 import inspect
+import sys
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -57,6 +59,14 @@ def check_no_arg_constructible(obj: Any, name: str) -> None:
                         f"parameters without defaults: {', '.join(required)}")
 
 
+def _caller_outside_mrfpe() -> int:
+    """``stacklevel`` of the first frame outside mrfpe, so a warning names the user's line."""
+    level, frame = 1, sys._getframe(1)  # level 1: the function calling warnings.warn
+    while frame is not None and frame.f_globals.get("__name__", "").split(".")[0] == "mrfpe":
+        frame, level = frame.f_back, level + 1
+    return level
+
+
 class Registry:
     """Discover, validate and look up the plugins of one entry-point group.
 
@@ -77,6 +87,7 @@ class Registry:
         self._validate = validate
         self._entries: dict[str, PluginInfo] | None = None
         self._local: dict[str, PluginInfo] = {}
+        self._warned: set[tuple[str, str]] = set()  # (name, error) already warned about
 
     # -- discovery -------------------------------------------------------
     def _load(self, ep: md.EntryPoint) -> PluginInfo:
@@ -111,7 +122,18 @@ class Registry:
                     continue
                 found[ep.name] = info
             self._entries = found
+            self._warn_broken(found)
         return {**self._entries, **self._local}
+
+    def _warn_broken(self, found: dict[str, PluginInfo]) -> None:
+        """A ``RuntimeWarning`` per broken plugin, once per process (as xarray's backends)."""
+        for key, info in found.items():
+            if info.ok or (key, info.error) in self._warned:
+                continue
+            self._warned.add((key, info.error or ""))
+            warnings.warn(f"{self.kind} plugin {key!r} ({info.target}, package {info.package}) "
+                          f"failed to load and is left out: {info.error}", RuntimeWarning,
+                          stacklevel=_caller_outside_mrfpe())
 
     def register(self, name: str, obj: Any) -> None:
         """Register ``obj`` in this process only (tests, notebooks)."""
@@ -138,17 +160,26 @@ class Registry:
         """Broken plugins: ``{name: reason}``."""
         return {k: v.error or "" for k, v in self.broken().items()}
 
-    def get(self, name: str) -> Any:
-        """The plugin object registered as ``name``.
+    def get(self, name: str | type) -> Any:
+        """The plugin object registered as ``name``, or ``name`` itself if it is a class.
+
+        A class is validated (as a plugin would be) and returned, so that callers
+        can pass either a registered name or an unregistered class (xarray's
+        ``engine=`` accepts a backend class the same way).
 
         Raises
         ------
         ValueError
-            If ``name`` is not a string, is unknown (the message lists the
-            available plugins) or is broken.
+            If ``name`` is neither a string nor a class, is unknown (the message
+            lists the available plugins) or is broken.
+        TypeError
+            If ``name`` is a class that does not implement the interface.
         """
+        if inspect.isclass(name):
+            self._validate(name)
+            return name
         if not isinstance(name, str):
-            raise ValueError(f"{self.kind} name must be a string; got {name!r}")
+            raise ValueError(f"{self.kind} name must be a string or a class; got {name!r}")
         entries = self.entries()
         info = entries.get(name)
         if info is None:

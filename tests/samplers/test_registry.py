@@ -4,7 +4,9 @@ import importlib.metadata as md
 import subprocess
 import sys
 import types
+import warnings
 
+import numpy as np
 import pytest
 
 import mrfpe._plugins as plugins
@@ -62,7 +64,9 @@ def fake_plugins(monkeypatch):
         return md.entry_points(**kw)
 
     monkeypatch.setattr(plugins.md, "entry_points", entry_points)
-    samplers.registry.entries(refresh=True)
+    with warnings.catch_warnings():  # the warning itself is tested below
+        warnings.simplefilter("ignore", RuntimeWarning)
+        samplers.registry.entries(refresh=True)
     yield
     monkeypatch.undo()
     samplers.registry.entries(refresh=True)
@@ -136,3 +140,36 @@ def test_listing_does_not_import_heavy_dependencies():
             "print(','.join(m for m in heavy if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "", f"listing imported {out.stdout.strip()}"
+
+
+def test_broken_plugins_warn_once(fake_plugins):
+    samplers.registry._warned.clear()
+    with pytest.warns(RuntimeWarning) as rec:
+        samplers.registry.entries(refresh=True)
+    assert rec[0].filename == __file__  # points at the caller, not at mrfpe
+    broken = {str(w.message).split("'")[1] for w in rec}
+    assert {"fake_import", "fake_args", "fake_kw", "fake_func"} <= broken
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        samplers.registry.entries(refresh=True)  # once: no second warning
+        samplers.available()
+
+
+def test_get_and_sample_accept_a_class_or_an_instance():
+    import mrfpe
+    from mrfpe.samplers.pmc import PMC
+    from mrfpe.testing import CorrelatedGaussian
+
+    assert samplers.get(Good) is Good and samplers.registry.get(PMC) is PMC
+    with pytest.raises(TypeError):
+        samplers.get(NeedsArgs)
+    t, cfg = CorrelatedGaussian(), {"n_samples": 50, "n_iterations": 2}
+    by_name = mrfpe.sample("pmc", t, seed=1, **cfg)
+    by_class = mrfpe.sample(PMC, t, seed=1, **cfg)
+    by_instance = mrfpe.sample(PMC(**cfg), t, seed=1)
+    for post in (by_class, by_instance):
+        assert np.array_equal(post["theta"].values, by_name["theta"].values)
+    with pytest.raises(TypeError, match="already constructed"):
+        mrfpe.sample(PMC(), t, seed=1, n_samples=10)
+    with pytest.raises(TypeError):
+        mrfpe.sample(object(), t, seed=1)

@@ -20,7 +20,7 @@ __all__ = ["available", "broken", "get", "registry", "table", "validate_sampler"
 
 available = registry.names  # names of the working samplers, sorted
 broken = registry.errors  # broken sampler plugins: {name: reason}
-get = registry.get  # the sampler class registered as ``name`` (ValueError lists the others)
+get = registry.get  # the class registered as ``name`` (ValueError lists the others), or a class
 
 
 def table() -> str:

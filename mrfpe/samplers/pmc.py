@@ -3,9 +3,10 @@
 Importance functions ``G^n`` (7.9): when the target offers ``partition(k, kind)``
 they are its ``k`` sub-lattice targets (5.67 blocks / 5.68 strided subsets),
 softened with power ``l`` (5.69–5.72) and cycled ``n mod k``; otherwise the
-softened full target. Iteration 0 weights an evenly spaced grid; every
-resampling adds Gaussian jitter ``σ_n = σ₀ (1 − n/T)`` (σ₀ = 0.07, 6.6), and
-after the last iteration the set is reweighted with the full target.
+softened full target. Iteration 0 weights a starting set (the thesis's evenly
+spaced grid, or by default for ``"mixture"`` a scrambled Halton design); every
+resampling adds Gaussian jitter (the thesis's ``σ_n = σ₀ (1 − n/T)``, σ₀ = 0.07,
+6.6), and after the last iteration the set is reweighted with the full target.
 
 Variants
 --------
@@ -16,9 +17,14 @@ Variants
     resampling mixture the particles were drawn from (log-sum-exp over the
     distinct ancestors, vectorised in chunks). The final weights are
     ``target(x) / q^{T-1}(x)``. One ``G^n`` evaluation per particle and iteration.
-    By default the softening power anneals adaptively (``power="auto"``) and the
-    kernel is diagonal, ``min(σ_n, h·sd_j)`` per parameter (``kernel="adaptive"``):
-    extensions beyond the thesis, measured in ``benchmarks/bench_pmc.py``;
+    By default the softening power anneals adaptively (``power="auto"``), the
+    start is a scrambled Halton design (``initial="halton"``; a tensor grid in
+    10-D is the 2¹⁰ corners of {0.25, 0.75}¹⁰) and the kernel follows the cloud's
+    weighted covariance (``kernel="covariance"``, see :data:`KERNEL_SCALE`):
+    extensions beyond the thesis, measured in ``tests/samplers/accuracy_table.py``
+    and ``benchmarks/bench_pmc.py``. ``kernel="adaptive"`` (diagonal
+    ``min(σ_n, h·sd_j)``, the default until issue 12: too narrow once σ_n → 0,
+    weighted sd 0.67–0.77 of the truth) and ``initial="grid"`` are kept;
     ``power=<float>, kernel="isotropic"`` is the thesis's fixed softening and
     spherical ``σ_n``.
 ``"thesis2"`` (PMC (II), 6.6.2, exact): the set represents the uniform
@@ -29,12 +35,16 @@ Variants
     jitter, ``π^n = ePL(θ^n) / G^n(θ^n)``, resample (full-target evaluations
     every iteration).
 
-Boundary choice: a jittered particle that leaves the bounds is redrawn from the
-same kernel (no reflection), i.e. each kernel is the Gaussian truncated to the
-box; the mixture density ``q`` uses the truncated kernels' normalising
-constants, so the weights stay exact and no particle is wasted outside the
-support. Particles where ``G^n`` is zero get zero weight in the thesis variants
-(``1/G`` is undefined there).
+Boundary choice: with the diagonal kernels a jittered particle that leaves the
+bounds is redrawn from the same kernel (no reflection), i.e. each kernel is the
+Gaussian truncated to the box; the mixture density ``q`` uses the truncated
+kernels' normalising constants, so the weights stay exact and no particle is
+wasted outside the support. A full-covariance kernel's box mass has no closed
+form, so with ``kernel="covariance"`` a particle that leaves the box is redrawn
+from a *fresh ancestor* (:func:`~mrfpe.samplers.kit.jitter_resampled`): the draws
+then follow the untruncated mixture restricted to the box, whose normaliser is
+one global constant that self-normalisation removes. Particles where ``G^n`` is
+zero get zero weight in the thesis variants (``1/G`` is undefined there).
 
 The MAP trace is best-so-far under the *full* target: each iteration
 evaluates the full target at its best particle under ``G^n`` (one evaluation,
@@ -61,13 +71,16 @@ from mrfpe.samplers.kit import (
     ess,
     grid,
     jitter,
+    jitter_resampled,
     log_kernel_mass,
     log_mixture_density,
+    log_mixture_density_chol,
     log_ratio,
     normalise_log_weights,
     partition_or_none,
     resample,
     softened,
+    space_filling,
 )
 
 __all__ = ["PMC", "THESIS_POWER", "Context", "PMCState", "final_log_weight", "init_state",
@@ -132,14 +145,19 @@ def mixture_step(pmc: PMC, ctx: Context, state: PMCState, n: int,
         power, lw = pmc._soften(raw, 0.0, 0.0)
         return state._replace(log_weight=lw, power=power, log_den=None), raw
     lw_prev = state.log_weight
-    sigma = pmc._kernel(n, x, lw_prev)
     ok = pmc.ess_threshold is None or ess(lw_prev) < pmc.ess_threshold * lw_prev.size
     idx = (resample(lw_prev, pmc.n_samples, pmc.resampling, ctx.rng) if ok
            else np.arange(x.shape[0]))
     anc, counts = np.unique(idx, return_counts=True)
-    x_new = jitter(x[idx], sigma, ctx.bounds, ctx.rng)
-    log_w = np.log(counts / idx.size) - log_kernel_mass(x[anc], sigma, ctx.bounds)
-    lq = log_mixture_density(x_new, x[anc], log_w, sigma)
+    if pmc.kernel == "covariance":  # full kernel, out-of-box draws take a fresh ancestor
+        chol = pmc._kernel_chol(x, lw_prev)
+        x_new = jitter_resampled(x[idx], chol, ctx.bounds, ctx.rng)
+        lq = log_mixture_density_chol(x_new, x[anc], np.log(counts / idx.size), chol)
+    else:  # diagonal kernels truncated to the box, with their exact normalisers
+        sigma = pmc._kernel(n, x, lw_prev)
+        x_new = jitter(x[idx], sigma, ctx.bounds, ctx.rng)
+        log_w = np.log(counts / idx.size) - log_kernel_mass(x[anc], sigma, ctx.bounds)
+        lq = log_mixture_density(x_new, x[anc], log_w, sigma)
     raw = run.evaluate(g, x_new)
     power, lw = pmc._soften(raw, lq, state.power)
     return PMCState(x=x_new, log_weight=lw, log_den=lq, power=power, resampled=bool(ok)), raw
@@ -184,6 +202,16 @@ def thesis1_step(cfg: Any, ctx: Context, state: PMCState, n: int,
                           log_target_next=lt[res]), lg
 
 
+#: ``kernel="covariance"``: the kernel is ``(KERNEL_SCALE · h)² Ĉ``, h Silverman's factor
+#: (0.54 in 3-D, 0.84 in 10-D for N = 1000), and ``Ĉ`` is estimated from the weights
+#: flattened (``w^λ``, largest λ ≤ 1) until their ESS is at least ``COV_ESS · N``, so a
+#: cloud whose weights collapse onto a few particles keeps a kernel as wide as the
+#: cloud instead of shrinking with it. Measured on 3-D and 10-D (AR(1) ρ = 0.7)
+#: Gaussians, tests/samplers/accuracy_table.py: scale 1 with the raw weights collapses
+#: in 10-D (sd ratio 0.06–0.6); 1.5 with COV_ESS = 0.1 gives 0.91–1.03, final ESS ~300.
+KERNEL_SCALE = 1.5
+COV_ESS = 0.1
+
 STEPS: dict[str, Step] = {"mixture": mixture_step, "thesis2": thesis2_step,
                           "thesis1": thesis1_step}
 
@@ -197,15 +225,17 @@ class PMC(Sampler):
     importance functions (7.9), softening ``power`` (5.69–5.72), ``sigma0`` = 0.07
     initial jitter decreasing linearly to 0, ``kernel`` shape, ``resampling``
     scheme (see :mod:`mrfpe.resampling`),
-    ``ess_threshold`` (mixture only: resample only when ESS < threshold·N) and
+    ``ess_threshold`` (mixture only: resample only when ESS < threshold·N),
+    ``initial`` set (``"grid"`` or ``"halton"``) and
     ``keep_history`` (store every iteration's weighted set).
 
     ``power``, ``kernel`` and ``resampling`` = None take the variant's
     defaults: for "mixture" ``power="auto"`` (adaptive annealing, ``auto_ess``),
-    ``kernel="adaptive"`` (per-parameter ``min(σ_n, h·sd_j)``) and systematic
+    ``kernel="covariance"`` (the cloud's weighted covariance), ``initial="halton"``
+    and systematic
     resampling (less drift, so a second mode survives to the final reweighting);
-    for the thesis variants the fixed :data:`THESIS_POWER`, the spherical ``σ_n``
-    and multinomial resampling exactly as 6.6. The thesis gives no softening
+    for the thesis variants the fixed :data:`THESIS_POWER`, the spherical ``σ_n``,
+    the grid and multinomial resampling exactly as 6.6. The thesis gives no softening
     power, and on a 100x100 PL the spherical kernel cannot follow a target
     that is ~100x sharper in one parameter than along a ridge in the others:
     ``benchmarks/bench_pmc.py`` measures the choice.
@@ -219,7 +249,8 @@ class PMC(Sampler):
                  variant: str = "mixture", k: int = 3, partition: str = "strided",
                  power: float | str | None = None, auto_ess: float = 0.5,
                  sigma0: float = 0.07, kernel: str | None = None, resampling: str | None = None,
-                 ess_threshold: float | None = None, keep_history: bool = False):
+                 ess_threshold: float | None = None, initial: str | None = None,
+                 keep_history: bool = False):
         self.n_samples = check_positive_int("n_samples", n_samples, 2)
         self.n_iterations = check_positive_int("n_iterations", n_iterations, 1)
         self.variant = check_choice("variant", variant, ("mixture", "thesis2", "thesis1"))
@@ -238,11 +269,14 @@ class PMC(Sampler):
         self.auto_ess = check_range("auto_ess", auto_ess, 0.0, 1.0, low_open=True, high_open=True)
         self.sigma0 = check_range("sigma0", sigma0, 0.0, np.inf, low_open=True, high_open=True)
         if kernel is None:
-            kernel = "adaptive" if variant == "mixture" else "isotropic"
-        self.kernel = check_choice("kernel", kernel, ("isotropic", "adaptive"))
-        if kernel == "adaptive" and variant != "mixture":
-            raise ValueError("kernel='adaptive' applies to variant='mixture' only (the thesis "
+            kernel = "covariance" if variant == "mixture" else "isotropic"
+        self.kernel = check_choice("kernel", kernel, ("isotropic", "adaptive", "covariance"))
+        if kernel != "isotropic" and variant != "mixture":
+            raise ValueError(f"kernel={kernel!r} applies to variant='mixture' only (the thesis "
                              f"variants use the spherical σ_n); got variant={variant!r}")
+        if initial is None:
+            initial = "halton" if variant == "mixture" else "grid"
+        self.initial = check_choice("initial", initial, ("grid", "halton"))
         if resampling is None:
             resampling = "systematic" if variant == "mixture" else "multinomial"
         self.resampling = check_choice("resampling", resampling, RESAMPLING_METHODS)
@@ -305,6 +339,25 @@ class PMC(Sampler):
         h = (4.0 / ((d + 2) * x.shape[0])) ** (1.0 / (d + 4))
         return np.clip(h * sd, 1e-6 * sigma, sigma)
 
+    def _kernel_chol(self, x: np.ndarray, lw: np.ndarray) -> np.ndarray:
+        """Cholesky factor of ``kernel="covariance"``: ``(KERNEL_SCALE·h)² Ĉ`` with ``Ĉ``
+        the cloud's weighted covariance (weights flattened to ESS >= COV_ESS·N) and
+        ``h`` Silverman's factor (see :meth:`_kernel`)."""
+        lw = np.where(np.isfinite(lw), lw, -np.inf)
+        lam = 1.0
+        if np.isfinite(lw).sum() > 1:
+            for _ in range(30):  # flatten the weights until the estimate rests on enough points
+                if ess(lam * lw) >= COV_ESS * lw.size:
+                    break
+                lam *= 0.7
+        w = np.exp(normalise_log_weights(lam * lw))
+        dev = x - w @ x
+        cov = (dev * w[:, None]).T @ dev
+        n, d = x.shape
+        h = KERNEL_SCALE * (4.0 / ((d + 2) * n)) ** (1.0 / (d + 4))
+        ridge = 1e-12 * np.ones(d) + 1e-9 * np.trace(cov) / d  # a collapsed cloud stays PD
+        return np.linalg.cholesky(h**2 * cov + np.diag(ridge))
+
     # -- run -----------------------------------------------------------------
     def run(self, target: Any, *, seed: int | None = None, progress: bool = False,
             callback: Callback | None = None) -> xr.Dataset:
@@ -316,7 +369,9 @@ class PMC(Sampler):
         run = Run(target, T, progress=progress, callback=callback, desc=f"pmc/{self.variant}")
         ctx = Context(run, np.random.default_rng(seed), bounds)
         step, history = STEPS[self.variant], History(self.keep_history)
-        state = init_state(grid(bounds, self.n_samples), self.power)
+        start = (grid(bounds, self.n_samples) if self.initial == "grid"
+                 else space_filling(bounds, self.n_samples, ctx.rng))
+        state = init_state(start, self.power)
         for n in range(T):
             state, lg = step(self, ctx, state, n, G[n % len(G)])
             lw = state.log_weight

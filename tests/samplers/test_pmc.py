@@ -175,8 +175,8 @@ def test_bad_target_and_seed():
 
 def test_variant_defaults():
     m, t2 = PMC(), PMC(variant="thesis2")
-    assert (m.power, m.kernel) == ("auto", "adaptive")
-    assert (t2.power, t2.kernel) == (0.01, "isotropic")
+    assert (m.power, m.kernel, m.initial) == ("auto", "covariance", "halton")  # issue 12
+    assert (t2.power, t2.kernel, t2.initial) == (0.01, "isotropic", "grid")
     assert PMC(**m.get_config()).get_config() == m.get_config()  # config round-trips
 
 

@@ -38,10 +38,14 @@ Validators
     :func:`check_range`, :func:`check_choice`, :func:`check_bool`,
     :func:`check_chain_length`.
 Starting points
-    :func:`grid` (the thesis's evenly spaced set), :func:`draw_in_support`.
+    :func:`grid` (the thesis's evenly spaced set), :func:`space_filling`
+    (scrambled Halton points, any dimension), :func:`draw_in_support`.
 Jitter kernels
     :func:`jitter` (Gaussian truncated to the box), :func:`log_kernel_mass`
-    (its normalisers), :func:`log_mixture_density`.
+    (its normalisers), :func:`log_mixture_density`; for full-covariance kernels
+    :func:`jitter_resampled` (out-of-box draws take a fresh ancestor, so the
+    normaliser is global) and :func:`log_mixture_density_chol`.
+
 Importance functions
     :func:`partition_or_none`, :func:`softened`, :data:`THESIS_POWER`.
 Weights and resampling
@@ -55,10 +59,15 @@ from mrfpe.mixture import log_mixture_density
 from mrfpe.resampling import METHODS as RESAMPLING_METHODS
 from mrfpe.resampling import ess, log_ratio, normalise_log_weights, perplexity, resample
 from mrfpe.samplers.kit.chains import KeptStates, check_chain_length
-from mrfpe.samplers.kit.draws import draw_in_support, grid
+from mrfpe.samplers.kit.draws import draw_in_support, grid, space_filling
 from mrfpe.samplers.kit.history import History
 from mrfpe.samplers.kit.importance import THESIS_POWER, partition_or_none, softened
-from mrfpe.samplers.kit.jitter import jitter, log_kernel_mass
+from mrfpe.samplers.kit.jitter import (
+    jitter,
+    jitter_resampled,
+    log_kernel_mass,
+    log_mixture_density_chol,
+)
 from mrfpe.samplers.kit.runlog import Run
 from mrfpe.validation import (
     check_bool,
@@ -73,7 +82,8 @@ __all__ = [
     "RESAMPLING_METHODS", "THESIS_POWER", "History", "KeptStates", "Run", "check_bool",
     "check_chain_length", "check_choice", "check_positive_int", "check_range", "check_seed",
     "check_target",
-    "draw_in_support", "ess", "grid", "jitter", "log_kernel_mass", "log_mixture_density",
+    "draw_in_support", "ess", "grid", "jitter", "jitter_resampled", "log_kernel_mass",
+    "log_mixture_density", "log_mixture_density_chol",
     "log_ratio", "normalise_log_weights", "partition_or_none", "perplexity", "resample",
-    "softened",
+    "softened", "space_filling",
 ]

@@ -1,0 +1,128 @@
+"""Accuracy of every sampler's *default* configuration on Gaussians in the unit cube.
+
+Not collected by pytest (no ``test_`` prefix): a measurement script for issue 12.
+
+    python tests/samplers/accuracy_table.py                 # every sampler, 3-D, 3 seeds
+    python tests/samplers/accuracy_table.py --dim 10 pmc smc mh
+    python tests/samplers/accuracy_table.py --seeds 5 --set pmc.variant=thesis2 pmc
+
+Targets (truth known exactly, no partition offered):
+
+* ``--dim 3``: an independent correlated Gaussian, sd (0.05, 0.065, 0.08),
+  correlations (−0.5, 0.3, 0.4), mean near the centre;
+* ``--dim 10``: AR(1) correlation ρ = 0.7, sd 0.04, mean 0.5.
+
+Columns: worst |weighted mean − truth| / sd over parameters, worst and best
+weighted-sd / true-sd, ESS (Kish for weighted sets; for equal-weight chains
+ArviZ's bulk ESS on the (chain, draw) layout, minimum over parameters), each as
+the median over seeds (min–max in brackets), and pass = median mean error ≤ 0.25
+and median sd ratio in [0.85, 1.15] (``--dim 10``: [0.8, 1.2]).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+import numpy as np
+from scipy import stats
+
+import mrfpe
+from mrfpe import posterior as P
+from mrfpe.targets.base import Target
+
+SAMPLERS = ["pmc", "sir", "ppf", "mh", "emcee", "dw_q", "dw_r", "smc"]
+
+
+class Gaussian(Target):
+    """N(mean, cov) truncated to the unit cube (more than 5 sd from every face)."""
+
+    bounds: np.ndarray
+
+    def __init__(self, mean: np.ndarray, cov: np.ndarray):
+        self.mean, self.cov = np.asarray(mean, float), np.asarray(cov, float)
+        self.sd = np.sqrt(np.diag(self.cov))
+        self.param_names = tuple(f"p{i}" for i in range(self.mean.size))
+        self.bounds = np.array([[0.0, 1.0]] * self.mean.size)
+        self._mvn = stats.multivariate_normal(self.mean, self.cov)
+
+    def _log_prob(self, theta: np.ndarray) -> np.ndarray:
+        return np.atleast_1d(self._mvn.logpdf(theta))
+
+
+def gaussian(dim: int) -> Gaussian:
+    if dim == 3:
+        sd = np.array([0.05, 0.065, 0.08])
+        corr = np.array([[1.0, -0.5, 0.3], [-0.5, 1.0, 0.4], [0.3, 0.4, 1.0]])
+        return Gaussian([0.42, 0.57, 0.5], corr * np.outer(sd, sd))
+    i = np.arange(dim)
+    corr = 0.7 ** np.abs(i[:, None] - i[None, :])
+    return Gaussian(np.full(dim, 0.5), corr * 0.04**2)
+
+
+def chain_ess(post, n_chains: int) -> float:
+    import arviz as az
+
+    x = post["theta"].values  # step-major: (K·C, d)
+    x = x.reshape(-1, n_chains, x.shape[1]).transpose(1, 0, 2)
+    return float(min(az.ess(x[:, :, j]) for j in range(x.shape[2])))
+
+
+def measure(name: str, target: Gaussian, seed: int, config: dict) -> tuple[float, ...]:
+    post = mrfpe.sample(name, target, seed=seed, **config)
+    m, sd = P.weighted_mean(post), np.sqrt(np.diag(P.weighted_cov(post)))
+    err = np.abs(m - target.mean) / target.sd
+    ratio = sd / target.sd
+    lw = post["log_weight"].values
+    if np.allclose(lw, lw[0]) and name in ("mh", "emcee"):
+        cfg = json.loads(post.attrs["config"])
+        ess = chain_ess(post, int(cfg.get("n_chains", cfg.get("n_walkers", 1))))
+    else:
+        ess = P.ess(post)
+    return float(err.max()), float(ratio.min()), float(ratio.max()), ess
+
+
+def parse_sets(items: list[str]) -> dict[str, dict]:
+    out: dict[str, dict] = {}
+    for item in items:
+        key, value = item.split("=", 1)
+        sampler, opt = key.split(".", 1)
+        try:
+            value = json.loads(value)
+        except json.JSONDecodeError:
+            pass
+        out.setdefault(sampler, {})[opt] = value
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("samplers", nargs="*", default=SAMPLERS)
+    ap.add_argument("--dim", type=int, default=3, choices=(3, 10))
+    ap.add_argument("--seeds", type=int, default=3)
+    ap.add_argument("--set", action="append", default=[], metavar="SAMPLER.KEY=VALUE")
+    args = ap.parse_args(argv)
+    target, sets = gaussian(args.dim), parse_sets(args.set)
+    lo, hi = (0.85, 1.15) if args.dim == 3 else (0.8, 1.2)
+    print(f"{args.dim}-D Gaussian, default configurations, seeds 0..{args.seeds - 1}")
+    print("| sampler | config | mean error (sd) | sd ratio | ESS | pass |")
+    print("|---|---|---|---|---|---|")
+    for name in args.samplers:
+        cfg = sets.get(name, {})
+        rows = np.array([measure(name, target, s, cfg) for s in range(args.seeds)])
+        med = np.median(rows, axis=0)
+        ok = med[0] <= 0.25 and med[1] >= lo and med[2] <= hi
+
+        def rng(j: int, fmt: str = ".2f", med=med, rows=rows) -> str:
+            return f"{med[j]:{fmt}} [{rows[:, j].min():{fmt}}–{rows[:, j].max():{fmt}}]"
+
+        sd_txt = (f"{med[1]:.2f}–{med[2]:.2f} "
+                  f"[{rows[:, 1].min():.2f}–{rows[:, 2].max():.2f}]")
+        print(f"| {name} | {json.dumps(cfg) if cfg else 'default'} | {rng(0)} | {sd_txt} | "
+              f"{rng(3, '.0f')} | {'yes' if ok else 'NO'} |", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

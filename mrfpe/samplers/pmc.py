@@ -20,7 +20,7 @@ Variants
     By default the softening power anneals adaptively (``power="auto"``), the
     start is a scrambled Halton design (``initial="halton"``; a tensor grid in
     10-D is the 2¹⁰ corners of {0.25, 0.75}¹⁰) and the kernel follows the cloud's
-    weighted covariance (``kernel="covariance"``, see :data:`KERNEL_SCALE`):
+    weighted covariance (``kernel="covariance"``, :func:`~mrfpe.samplers.kit.covariance_kernel`):
     extensions beyond the thesis, measured in ``tests/samplers/accuracy_table.py``
     and ``benchmarks/bench_pmc.py``. ``kernel="adaptive"`` (diagonal
     ``min(σ_n, h·sd_j)``, the default until issue 12: too narrow once σ_n → 0,
@@ -68,13 +68,13 @@ from mrfpe.samplers.kit import (
     check_bool,
     check_seed,
     check_target,
+    covariance_kernel,
     ess,
     grid,
     jitter,
-    jitter_resampled,
+    jitter_mixture,
     log_kernel_mass,
     log_mixture_density,
-    log_mixture_density_chol,
     log_ratio,
     normalise_log_weights,
     partition_or_none,
@@ -148,12 +148,10 @@ def mixture_step(pmc: PMC, ctx: Context, state: PMCState, n: int,
     ok = pmc.ess_threshold is None or ess(lw_prev) < pmc.ess_threshold * lw_prev.size
     idx = (resample(lw_prev, pmc.n_samples, pmc.resampling, ctx.rng) if ok
            else np.arange(x.shape[0]))
-    anc, counts = np.unique(idx, return_counts=True)
     if pmc.kernel == "covariance":  # full kernel, out-of-box draws take a fresh ancestor
-        chol = pmc._kernel_chol(x, lw_prev)
-        x_new = jitter_resampled(x[idx], chol, ctx.bounds, ctx.rng)
-        lq = log_mixture_density_chol(x_new, x[anc], np.log(counts / idx.size), chol)
+        x_new, lq = jitter_mixture(x, idx, covariance_kernel(x, lw_prev), ctx.bounds, ctx.rng)
     else:  # diagonal kernels truncated to the box, with their exact normalisers
+        anc, counts = np.unique(idx, return_counts=True)
         sigma = pmc._kernel(n, x, lw_prev)
         x_new = jitter(x[idx], sigma, ctx.bounds, ctx.rng)
         log_w = np.log(counts / idx.size) - log_kernel_mass(x[anc], sigma, ctx.bounds)
@@ -202,15 +200,6 @@ def thesis1_step(cfg: Any, ctx: Context, state: PMCState, n: int,
                           log_target_next=lt[res]), lg
 
 
-#: ``kernel="covariance"``: the kernel is ``(KERNEL_SCALE · h)² Ĉ``, h Silverman's factor
-#: (0.54 in 3-D, 0.84 in 10-D for N = 1000), and ``Ĉ`` is estimated from the weights
-#: flattened (``w^λ``, largest λ ≤ 1) until their ESS is at least ``COV_ESS · N``, so a
-#: cloud whose weights collapse onto a few particles keeps a kernel as wide as the
-#: cloud instead of shrinking with it. Measured on 3-D and 10-D (AR(1) ρ = 0.7)
-#: Gaussians, tests/samplers/accuracy_table.py: scale 1 with the raw weights collapses
-#: in 10-D (sd ratio 0.06–0.6); 1.5 with COV_ESS = 0.1 gives 0.91–1.03, final ESS ~300.
-KERNEL_SCALE = 1.5
-COV_ESS = 0.1
 
 STEPS: dict[str, Step] = {"mixture": mixture_step, "thesis2": thesis2_step,
                           "thesis1": thesis1_step}
@@ -338,25 +327,6 @@ class PMC(Sampler):
         d = x.shape[1]
         h = (4.0 / ((d + 2) * x.shape[0])) ** (1.0 / (d + 4))
         return np.clip(h * sd, 1e-6 * sigma, sigma)
-
-    def _kernel_chol(self, x: np.ndarray, lw: np.ndarray) -> np.ndarray:
-        """Cholesky factor of ``kernel="covariance"``: ``(KERNEL_SCALE·h)² Ĉ`` with ``Ĉ``
-        the cloud's weighted covariance (weights flattened to ESS >= COV_ESS·N) and
-        ``h`` Silverman's factor (see :meth:`_kernel`)."""
-        lw = np.where(np.isfinite(lw), lw, -np.inf)
-        lam = 1.0
-        if np.isfinite(lw).sum() > 1:
-            for _ in range(30):  # flatten the weights until the estimate rests on enough points
-                if ess(lam * lw) >= COV_ESS * lw.size:
-                    break
-                lam *= 0.7
-        w = np.exp(normalise_log_weights(lam * lw))
-        dev = x - w @ x
-        cov = (dev * w[:, None]).T @ dev
-        n, d = x.shape
-        h = KERNEL_SCALE * (4.0 / ((d + 2) * n)) ** (1.0 / (d + 4))
-        ridge = 1e-12 * np.ones(d) + 1e-9 * np.trace(cov) / d  # a collapsed cloud stays PD
-        return np.linalg.cholesky(h**2 * cov + np.diag(ridge))
 
     # -- run -----------------------------------------------------------------
     def run(self, target: Any, *, seed: int | None = None, progress: bool = False,

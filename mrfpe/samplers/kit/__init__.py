@@ -42,9 +42,12 @@ Starting points
     (scrambled Halton points, any dimension), :func:`draw_in_support`.
 Jitter kernels
     :func:`jitter` (Gaussian truncated to the box), :func:`log_kernel_mass`
-    (its normalisers), :func:`log_mixture_density`; for full-covariance kernels
+    (its normalisers), :func:`log_mixture_density`, :func:`log_resampling_mixture`
+    (the density a jittered resample was drawn from); for full-covariance kernels
     :func:`jitter_resampled` (out-of-box draws take a fresh ancestor, so the
-    normaliser is global) and :func:`log_mixture_density_chol`.
+    normaliser is global), :func:`log_mixture_density_chol`,
+    :func:`covariance_kernel` (a kernel shaped like the weighted cloud) and
+    :func:`jitter_mixture` (jitter and the mixture density in one call).
 
 Importance functions
     :func:`partition_or_none`, :func:`softened`, :data:`THESIS_POWER`.
@@ -63,10 +66,13 @@ from mrfpe.samplers.kit.draws import draw_in_support, grid, space_filling
 from mrfpe.samplers.kit.history import History
 from mrfpe.samplers.kit.importance import THESIS_POWER, partition_or_none, softened
 from mrfpe.samplers.kit.jitter import (
+    covariance_kernel,
     jitter,
+    jitter_mixture,
     jitter_resampled,
     log_kernel_mass,
     log_mixture_density_chol,
+    log_resampling_mixture,
 )
 from mrfpe.samplers.kit.runlog import Run
 from mrfpe.validation import (
@@ -79,11 +85,34 @@ from mrfpe.validation import (
 )
 
 __all__ = [
-    "RESAMPLING_METHODS", "THESIS_POWER", "History", "KeptStates", "Run", "check_bool",
-    "check_chain_length", "check_choice", "check_positive_int", "check_range", "check_seed",
+    "RESAMPLING_METHODS",
+    "THESIS_POWER",
+    "History",
+    "KeptStates",
+    "Run",
+    "check_bool",
+    "check_chain_length",
+    "check_choice",
+    "check_positive_int",
+    "check_range",
+    "check_seed",
     "check_target",
-    "draw_in_support", "ess", "grid", "jitter", "jitter_resampled", "log_kernel_mass",
-    "log_mixture_density", "log_mixture_density_chol",
-    "log_ratio", "normalise_log_weights", "partition_or_none", "perplexity", "resample",
-    "softened", "space_filling",
+    "covariance_kernel",
+    "draw_in_support",
+    "ess",
+    "grid",
+    "jitter",
+    "jitter_mixture",
+    "jitter_resampled",
+    "log_kernel_mass",
+    "log_mixture_density",
+    "log_mixture_density_chol",
+    "log_ratio",
+    "log_resampling_mixture",
+    "normalise_log_weights",
+    "partition_or_none",
+    "perplexity",
+    "resample",
+    "softened",
+    "space_filling",
 ]

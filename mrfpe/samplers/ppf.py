@@ -16,6 +16,16 @@ Over one time step this is PMC (II) with ``P`` iterations (thesis 5.6):
 ``PPF(n_partitions=P, k=P)`` and ``PMC(variant="thesis2", n_iterations=P, k=P)``
 give the same numbers, which the tests check.
 
+Weights (``weights``): ``"thesis"`` is the above, bit-for-bit (with the thesis's
+fixed power, :data:`~mrfpe.samplers.kit.THESIS_POWER`). It is biased: ``1/g^n``
+ignores the jitter, so on a 3-D Gaussian its final ESS is ~10 of 1000 and the mean
+~1 sd off, with the same sign over seeds. ``"mixture"`` (default since issue 12)
+accounts for the jitter: by 5.6 PPF over one time step is PMC, so each partition
+runs PMC's deterministic-mixture step (:func:`mrfpe.samplers.pmc.mixture_step`:
+weights ``g^n(x)^l / q^n(x)`` with ``q^n`` the jittered resample's density, a kernel
+following the cloud's covariance, the power annealed, ``power="auto"``) from the
+same grid, and the final weights are ``ϱ(x) / q(x)``.
+
 ``σ_n = σ₀ (1 − n/P)``; a jittered particle that leaves the bounds is redrawn
 from the same kernel. Particles where ``g^n`` vanishes get zero weight. The MAP
 trace is best-so-far under the full target (one evaluation per stage at the best
@@ -43,7 +53,14 @@ from mrfpe.samplers.kit import (
     partition_or_none,
     softened,
 )
-from mrfpe.samplers.pmc import Context, final_log_weight, init_state, thesis2_step
+from mrfpe.samplers.pmc import (
+    PMC,
+    Context,
+    final_log_weight,
+    init_state,
+    mixture_step,
+    thesis2_step,
+)
 
 __all__ = ["PPF"]
 
@@ -63,13 +80,23 @@ class PPF(Sampler):
     }
 
     def __init__(self, n_samples: int = 1000, n_partitions: int = 20, *, k: int = 3,
-                 partition: str = "strided", power: float = THESIS_POWER, sigma0: float = 0.07,
-                 resampling: str = "multinomial", keep_history: bool = False):
+                 partition: str = "strided", power: float | str | None = None,
+                 sigma0: float = 0.07, resampling: str = "multinomial",
+                 weights: str = "mixture", keep_history: bool = False):
         self.n_samples = check_positive_int("n_samples", n_samples, 2)
         self.n_partitions = check_positive_int("n_partitions", n_partitions, 1)
         self.k = check_positive_int("k", k, 1)
         self.partition = check_choice("partition", partition, ("strided", "block"))
-        self.power = check_range("power", power, 0.0, np.inf, low_open=True, high_open=True)
+        self.weights = check_choice("weights", weights, ("mixture", "thesis"))
+        if power is None:  # the weights' default: adaptive for "mixture", 5.69 fixed for thesis
+            power = "auto" if self.weights == "mixture" else THESIS_POWER
+        if isinstance(power, str):
+            check_choice("power", power, ("auto",))
+            if self.weights != "mixture":
+                raise ValueError("power='auto' applies to weights='mixture' only")
+        else:
+            power = check_range("power", power, 0.0, np.inf, low_open=True, high_open=True)
+        self.power = power
         self.sigma0 = check_range("sigma0", sigma0, 0.0, np.inf, low_open=True, high_open=True)
         self.resampling = check_choice("resampling", resampling, RESAMPLING_METHODS)
         self.keep_history = check_bool("keep_history", keep_history)
@@ -78,6 +105,12 @@ class PPF(Sampler):
         """Jitter of partition n: ``σ_n = σ₀ (1 − n/P)``."""
         return self.sigma0 * (1.0 - n / self.n_partitions)
 
+    def _mixture_config(self) -> PMC:
+        """The PMC whose mixture step is this PPF's with the jitter accounted for."""
+        return PMC(self.n_samples, self.n_partitions, variant="mixture", k=self.k,
+                   partition=self.partition, power=self.power, sigma0=self.sigma0,
+                   kernel="covariance", resampling=self.resampling, initial="grid")
+
     def run(self, target: Any, *, seed: int | None = None, progress: bool = False,
             callback: Callback | None = None) -> xr.Dataset:
         """Sample ``target``; returns the posterior Dataset (DESIGN.md)."""
@@ -85,14 +118,17 @@ class PPF(Sampler):
         check_seed(seed)
         P = self.n_partitions
         parts = partition_or_none(target, self.k, self.partition) or [target]
-        G = [softened(p, self.power) for p in parts]
+        if self.weights == "thesis":
+            # 5.33 (π ← π g^n), resample with noise, 5.34 (π ← π / g^n): PMC (II)'s step
+            G, cfg, step = [softened(p, self.power) for p in parts], self, thesis2_step
+        else:  # the jitter accounted for: PMC's deterministic-mixture step (thesis 5.6)
+            G, cfg, step = parts, self._mixture_config(), mixture_step
         run = Run(target, P, progress=progress, callback=callback, desc="ppf")
         ctx = Context(run, np.random.default_rng(seed), bounds)
         state = init_state(grid(bounds, self.n_samples), self.power)  # p(X^0): uniform
         history = History(self.keep_history)
         for n in range(P):
-            # 5.33 (π ← π g^n), resample with noise, 5.34 (π ← π / g^n): PMC (II)'s step
-            state, lg = thesis2_step(self, ctx, state, n, G[n % len(G)])
+            state, lg = step(cfg, ctx, state, n, G[n % len(G)])
             lw = state.log_weight
             if n == P - 1:
                 lt = run.evaluate(target, state.x)

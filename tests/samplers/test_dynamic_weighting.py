@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 from scipy import integrate
 
+from mrfpe import posterior as post_mod
 from mrfpe.posterior import validate, weights
 from mrfpe.samplers.dynamic_weighting import (
     QTypeDynamicWeighting,
@@ -172,7 +173,8 @@ def test_ensemble_of_chains_stays_correctly_weighted(cls, cfg, max_se):
     target = Bump1D()
     mean, sd = target.moments()
     n_steps, chains = 5, 20000
-    config = {"initial_weight": "absolute", "proposal_sd": 0.3, **cfg}  # wide: chains mix
+    config = {"initial_weight": "absolute", "proposal_sd": 0.3, "weights": "raw",  # IWIW: raw
+              **cfg}  # wide kernel: chains mix
     post = cls(n_steps=n_steps, n_chains=chains, burn_in=n_steps - 1, **config).run(target,
                                                                                     seed=5)
     assert post.sizes["sample"] == chains
@@ -230,3 +232,32 @@ def test_bad_config(kw, match):
         QTypeDynamicWeighting(a=1.0)
     with pytest.raises(TypeError):
         RTypeDynamicWeighting(a=2.0)  # a is a Q-type setting only
+
+
+def test_stratified_truncation_caps_each_stratum():
+    from mrfpe.samplers.dynamic_weighting import stratified_truncation
+
+    rng = np.random.default_rng(0)
+    lt = rng.normal(size=1000)
+    lw = rng.standard_cauchy(1000)
+    lw[5] = -np.inf
+    out = stratified_truncation(lw, lt, n_strata=4, quantile=0.9)
+    assert np.isneginf(out[5]) and np.all(out <= lw)
+    order = np.argsort(lt[np.isfinite(lw)])
+    for block in np.array_split(np.flatnonzero(np.isfinite(lw))[order], 4):
+        assert np.isclose(out[block].max(), np.quantile(lw[block], 0.9))
+    assert np.array_equal(stratified_truncation(lw, lt, quantile=1.0), np.where(
+        np.isfinite(lw), lw, -np.inf))
+
+
+def test_default_weights_are_stratified_truncation_raw_kept():
+    from mrfpe.samplers.dynamic_weighting import stratified_truncation
+    from mrfpe.testing import CorrelatedGaussian
+
+    t = CorrelatedGaussian()
+    raw = RTypeDynamicWeighting(n_steps=3000, weights="raw").run(t, seed=1)
+    post = RTypeDynamicWeighting(n_steps=3000).run(t, seed=1)
+    assert np.array_equal(raw["theta"].values, post["theta"].values)
+    expect = stratified_truncation(raw["log_weight"].values, raw["log_target"].values)
+    assert np.allclose(np.exp(post["log_weight"]), np.exp(post_mod.normalise_log_weights(expect)))
+    assert post_mod.ess(post) > post_mod.ess(raw)

@@ -1,32 +1,22 @@
 """mrfpe-smc: an adaptive-tempering Sequential Monte Carlo sampler, as a third-party plugin.
 
-It registers itself under the ``mrfpe.samplers`` entry-point group (see this
-package's ``pyproject.toml``) and uses only mrfpe's public API: the Target
-contract (``param_names``, ``bounds``, ``log_prob``, optional ``cost``), the
-sampler author's kit :mod:`mrfpe.samplers.kit` (validators, run log, support
-draws, resampling, ESS) and the optional base class :mod:`mrfpe.samplers.base`.
+Registered under the ``mrfpe.samplers`` entry-point group (this package's
+``pyproject.toml``); it uses only mrfpe's public API: the Target contract, the
+sampler author's kit :mod:`mrfpe.samplers.kit` and :mod:`mrfpe.samplers.base`.
 
-The algorithm (Del Moral, Doucet & Jasra 2006; Jasra et al. 2011): particles
-move from the uniform distribution on the target's box (β = 0) to the target
-(β = 1) through the tempered densities π_β(θ) ∝ 1_box(θ) · p(θ)^β. At each stage
+The algorithm (Del Moral, Doucet & Jasra 2006; Jasra et al. 2011) moves particles
+from the uniform law on the box (β = 0) to the target (β = 1) through
+π_β ∝ 1_box · p^β. Each stage (1) picks the next β by bisection so that the ESS of
+the incremental weights p^(β' − β) is ``ess_fraction`` × N, (2) resamples
+systematically, (3) makes random-walk Metropolis moves on π_β' with the cloud's
+covariance times s² (s steered towards ``target_acceptance``), as many as make a
+particle move at least once with probability ``mixing``.
 
-1. the next β is found by bisection so that the effective sample size of the
-   incremental weights w_i = p(θ_i)^(β' − β) equals ``ess_fraction`` × N;
-2. the particles are resampled systematically with those weights;
-3. each particle makes random-walk Metropolis moves targeting π_β', with a
-   Gaussian proposal whose covariance is the particle cloud's covariance times
-   s², s adapted from stage to stage towards ``target_acceptance``; the number
-   of moves per stage is chosen from the last acceptance rate so that a particle
-   moves at least once with probability ``mixing`` (between ``min_moves`` and
-   ``max_moves``).
-
-The product of the mean incremental weights estimates the normalising constant
-relative to the box: ``attrs["log_evidence"]`` = log ∫ p(θ) dθ / vol(box) (−inf
-when no particle finds the support; if ``max_stages`` stops the run early,
-``attrs["final_beta"]`` < 1 and the estimate is that of p^β).
-The final, equally weighted cloud at β = 1 is the sample set; ``step`` indexes
-the stages (step 0 is the initial uniform draw), with ``beta(step)``,
-``acceptance(step)`` and ``n_moves(step)`` as extra variables.
+``attrs["log_evidence"]`` = log ∫ p dθ / vol(box), the product of the mean
+incremental weights (−inf when no particle finds the support; ``final_beta`` < 1
+if ``max_stages`` stopped the run). The final equally weighted cloud is the sample
+set; ``step`` indexes the stages (0: the uniform draw), with ``beta``,
+``acceptance`` and ``n_moves`` per step.
 """
 
 from __future__ import annotations

@@ -174,7 +174,7 @@ class _DynamicWeighting(Sampler):
                      max_log_weight=float(np.max(log_pi)))
         lw = kept_lw.reshape(-1)
         return run.finish(kept_x.reshape(-1, d), kept_lp.reshape(-1), lw, sampler=self.name,
-                          config=self.get_config(), seed=seed,
+                          config=self.get_config(), seed=seed, chain=np.tile(np.arange(c), k),
                           extra_vars={"acceptance": (("step",), acceptance)})
 
     def _initial_log_weight(self, lp: np.ndarray) -> np.ndarray:

@@ -95,6 +95,6 @@ class EmceeEnsemble(Sampler):
         except Exception:  # a chain too short to estimate it
             tau = np.full(d, np.nan)
         return run.finish(kept_x.reshape(-1, d), kept_lp.reshape(-1), None, sampler=self.name,
-                          config=self.get_config(), seed=seed,
+                          config=self.get_config(), seed=seed, chain=np.tile(np.arange(w), k),
                           extra_vars={"acceptance": (("step",), acceptance),
                                       "autocorr_time": (("param",), np.asarray(tau, float))})

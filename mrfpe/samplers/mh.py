@@ -126,7 +126,7 @@ class MetropolisHastings(Sampler):
                 k += 1
             run.step(t, np.nan, acceptance=float(acceptance[t]), proposal_scale=float(scale))
         return run.finish(kept_x.reshape(-1, d), kept_lp.reshape(-1), None, sampler=self.name,
-                          config=self.get_config(), seed=seed,
+                          config=self.get_config(), seed=seed, chain=np.tile(np.arange(c), k),
                           extra_vars={"acceptance": (("step",), acceptance),
                                       "proposal_scale": (("step",), scales)})
 

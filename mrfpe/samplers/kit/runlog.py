@@ -97,8 +97,8 @@ class Run:
     def finish(self, theta: np.ndarray, log_target: np.ndarray, log_weight: np.ndarray, *,
                sampler: str, config: dict, seed: int | None,
                history_theta: Any = None, history_log_weight: Any = None,
-               extra_vars: dict | None = None) -> xr.Dataset:
-        """Close the bar and build the posterior Dataset."""
+               extra_vars: dict | None = None, **build_kwargs: Any) -> xr.Dataset:
+        """Close the bar and build the posterior Dataset (``build_kwargs`` go to ``build``)."""
         if self._bar is not None:
             self._bar.close()
         mt = np.asarray(self.map_theta)
@@ -110,4 +110,5 @@ class Run:
                      ess=self.ess, history_theta=history_theta,
                      history_log_weight=history_log_weight, sampler=sampler, config=config,
                      seed=seed, target=self.target, n_target_evals=self.n_evals,
-                     wall_time_s=time.perf_counter() - self.t0, extra_vars=extra_vars)
+                     wall_time_s=time.perf_counter() - self.t0, extra_vars=extra_vars,
+                     **build_kwargs)

@@ -8,7 +8,7 @@ Three published diagnostics, each computed by a well-known library:
     tail ESS (Vehtari et al. 2021), pooled over the chains, the smaller of the two
     for the worst parameter. Weighted chains (dynamic weighting): the chain ESS
     times Kish's efficiency ``ESS_kish / S`` (an approximation: the two losses
-    multiply). A posterior whose samples are autocorrelated but that carries no
+    multiply), and at least 1. A posterior whose samples are autocorrelated but that carries no
     ``chain`` is taken at its Kish ESS, which assumes independent draws: MCMC
     samplers must pass ``chain`` to :func:`mrfpe.posterior.build`.
     Unreliable when ``ess < ESS_MIN`` (100).
@@ -165,7 +165,7 @@ def diagnose(post: Any) -> dict[str, Any]:
         layout, chains = chain_layout(post)
         n_chains = int(chains.size)
         ess_chain, rhat = _chain_stats(theta, layout)
-        ess_used = ess_chain * ess_kish / S
+        ess_used = max(ess_chain * ess_kish / S, 1.0)
     else:
         ess_used = ess_kish
     reff = ess_chain / S if n_chains else 1.0

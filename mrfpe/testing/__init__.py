@@ -13,6 +13,7 @@ from mrfpe.testing.samplers import (
     check_bounds,
     check_callback,
     check_config,
+    check_diagnostics,
     check_gaussian_moments,
     check_interface,
     check_map_trace,
@@ -22,13 +23,15 @@ from mrfpe.testing.samplers import (
     check_sampler,
     check_schema,
     check_two_modes,
+    moment_tolerances,
     run_check,
 )
 from mrfpe.testing.targets import CorrelatedGaussian, MostlyMinusInf, TwoModes
 
 __all__ = [
     "CHECKS", "CorrelatedGaussian", "MostlyMinusInf", "TwoModes", "check_bounds",
-    "check_callback", "check_config", "check_gaussian_moments", "check_interface",
-    "check_map_trace", "check_mostly_minus_inf", "check_netcdf_roundtrip",
-    "check_reproducible", "check_sampler", "check_schema", "check_two_modes", "run_check",
+    "check_callback", "check_config", "check_diagnostics", "check_gaussian_moments",
+    "check_interface", "check_map_trace", "check_mostly_minus_inf", "check_netcdf_roundtrip",
+    "check_reproducible", "check_sampler", "check_schema", "check_two_modes",
+    "moment_tolerances", "run_check",
 ]

@@ -17,19 +17,27 @@ Declaring what does not apply
 A sampler may set the class attribute ``conformance``, a dict whose keys are
 check names (see :data:`CHECKS`) and whose values are ``False`` (the check does
 not apply: it is skipped and reported as skipped), or a dict of options for
-that check (e.g. looser tolerances). The special key ``"quick_config"`` holds
-the keyword configuration used when ``quick=True`` (a small budget so the suite
-runs in seconds); without it the defaults are used. Example, for a multi-start
-optimiser whose sample set is a set of optima, not a draw from the target::
+that check (e.g. a looser ``two_modes`` tolerance). The special key
+``"quick_config"`` holds the keyword configuration used when ``quick=True`` (a
+small budget so the suite runs in seconds); without it the defaults are used.
+
+Two checks cannot be declared away or loosened (:data:`UNDECLARABLE`):
+``diagnostics``, and ``gaussian_moments``, whose tolerances come from the
+posterior's own ESS (:func:`moment_tolerances`) within fixed absolute bounds. The
+one exemption from the moment check is a posterior that says it is not a sample:
+a multi-start optimiser builds its posterior with ``kind="optima"``
+(:func:`mrfpe.posterior.build`), and the check reports ``"skipped: optima ..."``::
 
     class MultiStart:
-        conformance = {
-            "quick_config": {"n_seeds": 27},
-            "gaussian_moments": False,   # optima do not sample the moments
-        }
+        conformance = {"quick_config": {"n_seeds": 27}}
+        def run(self, target, *, seed, progress=False, callback=None):
+            ...
+            return build(optima, log_target, ..., kind="optima")
 
-Keep such declarations explicit and explain them in the sampler's docs: a
-skipped check is a documented limitation, not a silent pass.
+A sampler that returns draws but declares ``"gaussian_moments": False`` (or
+tolerances) fails that check, saying so. Keep other declarations explicit and
+explain them in the sampler's docs: a skipped check is a documented limitation,
+not a silent pass.
 """
 
 from __future__ import annotations
@@ -49,9 +57,11 @@ from mrfpe.targets.base import Target
 from mrfpe.testing.targets import CorrelatedGaussian, MostlyMinusInf, TwoModes
 
 __all__ = [
-    "CHECKS", "check_bounds", "check_callback", "check_config", "check_gaussian_moments",
-    "check_interface", "check_map_trace", "check_mostly_minus_inf", "check_netcdf_roundtrip",
-    "check_reproducible", "check_sampler", "check_schema", "check_two_modes", "run_check",
+    "CHECKS", "CORR_MAX", "MEAN_MAX", "MOMENT_FLOOR", "MOMENT_Z", "SD_RATIO_BOUNDS",
+    "UNDECLARABLE", "check_bounds", "check_callback", "check_config", "check_diagnostics",
+    "check_gaussian_moments", "check_interface", "check_map_trace", "check_mostly_minus_inf",
+    "check_netcdf_roundtrip", "check_reproducible", "check_sampler", "check_schema",
+    "check_two_modes", "moment_tolerances", "run_check",
 ]
 
 
@@ -86,6 +96,22 @@ def _cached_run(cls: type, config: dict | None, target_cls: type, seed: int) -> 
             _CACHE.clear()
         _CACHE[key] = _run(cls, config, target_cls(), seed)
     return _CACHE[key].copy(deep=True)
+
+
+def _refused(exc: Exception) -> bool:
+    """A run that honestly refused a degenerate result (no sample found the support)."""
+    return isinstance(exc, ValueError) and "zero total weight" in str(exc)
+
+
+def _run_or_refusal(cls: type, config: dict | None, target_cls: type,
+                    seed: int) -> xr.Dataset | None:
+    """:func:`_cached_run`, or ``None`` if the run refused with zero total weight."""
+    try:
+        return _cached_run(cls, config, target_cls, seed)
+    except ValueError as exc:
+        if _refused(exc):
+            return None
+        raise
 
 
 def _fail(name: str, check: str, msg: str) -> AssertionError:
@@ -194,7 +220,10 @@ def check_bounds(sampler: Any, config: dict | None = None) -> None:
     """Samples and the MAP trace lie inside the target's bounds (all three targets)."""
     cls, name = _resolve(sampler)
     for tcls in (CorrelatedGaussian, TwoModes, MostlyMinusInf):
-        post = _cached_run(cls, config, tcls, 0)
+        post = _run_or_refusal(cls, config, tcls, 0) if tcls is MostlyMinusInf else \
+            _cached_run(cls, config, tcls, 0)
+        if post is None:
+            continue
         b = tcls.bounds
         for var in ("theta", "map_theta"):
             x = post[var].values
@@ -204,31 +233,108 @@ def check_bounds(sampler: Any, config: dict | None = None) -> None:
                             f"bounds of {tcls.__name__}, e.g. {x[bad][0]}")
 
 
-def check_gaussian_moments(sampler: Any, config: dict | None = None, *, mean_tol: float = 0.5,
-                           sd_ratio: tuple[float, float] = (0.6, 1.6),
-                           corr_tol: float = 0.3) -> None:
-    """On :class:`CorrelatedGaussian` the weighted mean and covariance are close to the truth.
+#: Monte Carlo standard errors a moment may be off by (z) and a floor in units of the
+#: true sd, for the ESS-derived tolerances of :func:`check_gaussian_moments`.
+MOMENT_Z = 4.0
+MOMENT_FLOOR = 0.05
+#: Absolute bounds, whatever the ESS: |mean error| <= 0.25 sd, sd ratio in [0.85, 1.15],
+#: |correlation error| <= 0.3.
+MEAN_MAX = 0.25
+SD_RATIO_BOUNDS = (0.85, 1.15)
+CORR_MAX = 0.3
 
-    Tolerances: ``|mean_i - μ_i| <= mean_tol · sd_i``; each weighted sd within
-    ``sd_ratio`` times the true sd; each correlation within ``corr_tol``.
+
+def moment_tolerances(ess: float, corr: np.ndarray, *, z: float = MOMENT_Z,
+                      floor: float = MOMENT_FLOOR) -> tuple[float, float, np.ndarray]:
+    """Tolerances of :func:`check_gaussian_moments` for a posterior of effective size ``ess``.
+
+    A few Monte Carlo standard errors of a Gaussian's moment estimates from ``ess``
+    independent draws, plus ``floor``, capped by the absolute bounds:
+
+    - mean error (in sd): ``min(z / √ESS + floor, MEAN_MAX)``;
+    - sd ratio: ``|ratio - 1| <= min(z / √(2 ESS) + floor, 0.15)``;
+    - correlation: ``|r - ρ| <= min(z (1 - ρ²) / √ESS + floor, CORR_MAX)``.
+
+    Returns ``(mean_tol, sd_tol, corr_tol)``.
+    """
+    e = max(float(ess), 1.0) if np.isfinite(ess) else 1.0
+    mean_tol = min(z / np.sqrt(e) + floor, MEAN_MAX)
+    sd_tol = min(z / np.sqrt(2 * e) + floor, SD_RATIO_BOUNDS[1] - 1, 1 - SD_RATIO_BOUNDS[0])
+    corr_tol = np.minimum(z * (1 - corr**2) / np.sqrt(e) + floor, CORR_MAX)
+    return float(mean_tol), float(sd_tol), corr_tol
+
+
+def check_gaussian_moments(sampler: Any, config: dict | None = None, *, z: float = MOMENT_Z,
+                           floor: float = MOMENT_FLOOR) -> str | None:
+    """On :class:`CorrelatedGaussian` the weighted mean, sd and correlations are accurate.
+
+    The tolerances (:func:`moment_tolerances`) follow from the posterior's own
+    effective sample size (:func:`mrfpe.posterior.diagnose`): a sampler that
+    claims a large ESS must be correspondingly accurate, and whatever it claims
+    the mean must lie within 0.25 sd of the truth and each sd within 0.85–1.15
+    times the true one. ``z`` and ``floor`` may be changed by a direct call
+    only; a ``conformance`` declaration can neither loosen nor skip this check.
+
+    Returns ``"optima"`` (not applicable) for a posterior of ``kind="optima"``,
+    the only way to be exempt: a multi-start optimiser's optima do not sample
+    the moments.
     """
     cls, name = _resolve(sampler)
     post = _cached_run(cls, config, CorrelatedGaussian, 0)
+    if post.attrs.get("kind", "draws") == "optima":
+        return "optima (kind='optima': not a posterior sample)"
     t = CorrelatedGaussian()
+    ess = _post.diagnose(post)["ess"]
+    mean_tol, sd_tol, corr_tol = moment_tolerances(ess, t.corr, z=z, floor=floor)
+    where = f"(ESS {ess:.0f}: tolerances mean {mean_tol:.3f} sd, sd ratio 1 ± {sd_tol:.3f})"
     m, c = _post.weighted_mean(post), _post.weighted_cov(post)
     err = np.abs(m - t.mean) / t.sd
     if np.any(err > mean_tol):
         raise _fail(name, "check_gaussian_moments", f"weighted mean {m.round(4)} vs true "
-                    f"{t.mean}: errors {err.round(2)} sd > {mean_tol} sd")
+                    f"{t.mean}: errors {err.round(2)} sd > {mean_tol:.3f} sd {where}")
     sd = np.sqrt(np.clip(np.diag(c), 0, None))
     ratio = sd / t.sd
-    if np.any(ratio < sd_ratio[0]) or np.any(ratio > sd_ratio[1]):
+    if np.any(np.abs(ratio - 1) > sd_tol):
         raise _fail(name, "check_gaussian_moments", f"weighted sd {sd.round(4)} vs true "
-                    f"{t.sd}: ratios {ratio.round(2)} outside {sd_ratio}")
-    corr = c / np.outer(sd, sd)
-    if np.any(np.abs(corr - t.corr) > corr_tol):
+                    f"{t.sd}: ratios {ratio.round(3)} outside 1 ± {sd_tol:.3f} {where}")
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = c / np.outer(sd, sd)
+    if not np.all(np.abs(corr - t.corr) <= corr_tol):
         raise _fail(name, "check_gaussian_moments", f"weighted correlation\n{corr.round(2)}\n"
-                    f"vs true\n{t.corr}\ndiffers by more than {corr_tol}")
+                    f"vs true\n{t.corr}\ndiffers by more than\n{corr_tol.round(3)} {where}")
+    return None
+
+
+def check_diagnostics(sampler: Any, config: dict | None = None) -> None:
+    """The posterior carries its diagnostics: ``kind`` and the ``diag_*`` attributes of
+    :func:`mrfpe.posterior.diagnose`, of the right types and equal to a fresh
+    diagnosis, and an unreliable set of draws says why (``diag_messages``). An MCMC
+    sampler's ``chain(sample)``, if present, has at least one chain per label."""
+    cls, name = _resolve(sampler)
+    from mrfpe.posterior.diagnostics import ATTRS, KINDS, diagnostics_attrs
+
+    post = _cached_run(cls, config, CorrelatedGaussian, 0)
+    kind = post.attrs.get("kind")
+    if kind not in KINDS:
+        raise _fail(name, "check_diagnostics", f"attrs['kind'] = {kind!r}, not one of {KINDS}")
+    missing = [k for k in ATTRS if k not in post.attrs]
+    if missing:
+        raise _fail(name, "check_diagnostics", f"posterior lacks the attributes {missing}; "
+                    "build it with mrfpe.posterior.build")
+    try:
+        fresh = diagnostics_attrs(_post.diagnose(post))
+    except ValueError as exc:
+        raise _fail(name, "check_diagnostics", f"diagnose raised: {exc}") from exc
+    for k, v in fresh.items():
+        got = post.attrs[k]
+        same = (got == v if not isinstance(v, float) else
+                (np.isnan(v) and isinstance(got, float) and np.isnan(got))
+                or np.isclose(got, v, rtol=1e-9, atol=0))
+        if not same:
+            raise _fail(name, "check_diagnostics", f"attrs[{k!r}] = {got!r} but diagnose "
+                        f"gives {v!r}")
+    if not post.attrs["diag_reliable"] and not post.attrs["diag_messages"]:
+        raise _fail(name, "check_diagnostics", "unreliable without a message saying why")
 
 
 def check_two_modes(sampler: Any, config: dict | None = None, *, tol: float = 0.05) -> None:
@@ -243,20 +349,28 @@ def check_two_modes(sampler: Any, config: dict | None = None, *, tol: float = 0.
 
 
 def check_mostly_minus_inf(sampler: Any, config: dict | None = None) -> None:
-    """A target that is ``-inf`` almost everywhere is survived: a valid posterior, and
-    samples with ``log_target = -inf`` carry no weight unless every sample does."""
+    """A target that is ``-inf`` almost everywhere is survived: either a valid posterior
+    in which samples with ``log_target = -inf`` carry no weight, or — if no sample found
+    the support — the honest ``ValueError`` of :func:`mrfpe.posterior.build` ("zero
+    total weight"), never another exception or a made-up uniform weighting."""
     cls, name = _resolve(sampler)
     try:
-        post = _cached_run(cls, config, MostlyMinusInf, 0)
+        post = _run_or_refusal(cls, config, MostlyMinusInf, 0)
     except Exception as exc:
         raise _fail(name, "check_mostly_minus_inf", f"raised {type(exc).__name__}: {exc}") from exc
+    if post is None:
+        return
     try:
         _post.validate(post)
     except ValueError as exc:
         raise _fail(name, "check_mostly_minus_inf", str(exc)) from exc
     lt, lw = post["log_target"].values, post["log_weight"].values
+    if not np.isfinite(lt).any():
+        raise _fail(name, "check_mostly_minus_inf", "every sample has log_target = -inf, yet "
+                    "the posterior weights them; a set with no sample in the support must be "
+                    "refused (build raises for all -inf log weights)")
     carrying = int(np.sum(np.isneginf(lt) & np.isfinite(lw)))
-    if np.isfinite(lt).any() and carrying:
+    if carrying:
         raise _fail(name, "check_mostly_minus_inf",
                     f"{carrying} samples with log_target = -inf carry weight")
 
@@ -266,7 +380,10 @@ def check_netcdf_roundtrip(sampler: Any, config: dict | None = None) -> None:
     unchanged (values, dtypes, attributes)."""
     cls, name = _resolve(sampler)
     for tcls in (CorrelatedGaussian, MostlyMinusInf):
-        post = _cached_run(cls, config, tcls, 0)
+        post = _run_or_refusal(cls, config, tcls, 0) if tcls is MostlyMinusInf else \
+            _cached_run(cls, config, tcls, 0)
+        if post is None:
+            continue
         with tempfile.TemporaryDirectory() as tmp:
             path = Path(tmp) / "post.nc"
             _post.save(post, path)
@@ -326,6 +443,7 @@ CHECKS: dict[str, Callable[..., None]] = {
     "reproducible": check_reproducible,
     "bounds": check_bounds,
     "gaussian_moments": check_gaussian_moments,
+    "diagnostics": check_diagnostics,
     "two_modes": check_two_modes,
     "mostly_minus_inf": check_mostly_minus_inf,
     "netcdf_roundtrip": check_netcdf_roundtrip,
@@ -334,25 +452,44 @@ CHECKS: dict[str, Callable[..., None]] = {
 }
 
 
+#: Checks a ``conformance`` declaration may neither skip (``False``) nor tune (options).
+#: ``gaussian_moments`` exempts exactly the posteriors of ``kind="optima"`` by itself.
+UNDECLARABLE = frozenset({"gaussian_moments", "diagnostics"})
+
+
 def run_check(sampler: Any, check: str, *, quick: bool = True) -> str:
-    """Run one named check with the sampler's declarations; returns ``"passed"`` or
-    ``"skipped: declared"`` and raises ``AssertionError`` on failure."""
+    """Run one named check with the sampler's declarations.
+
+    Returns ``"passed"``, ``"skipped: declared"`` (the sampler declared the check not
+    applicable) or ``"skipped: <reason>"`` (the check found it does not apply, e.g.
+    ``gaussian_moments`` on a set of optima); raises ``AssertionError`` on failure,
+    including a declaration that tries to skip or loosen a check in
+    :data:`UNDECLARABLE` for a posterior the check applies to.
+    """
     if check not in CHECKS:
         raise ValueError(f"unknown check {check!r}; checks: {', '.join(CHECKS)}")
-    cls, _ = _resolve(sampler)
+    cls, name = _resolve(sampler)
     decl = _declared(cls, check)
+    config = getattr(cls, "conformance", {}).get("quick_config") if quick else None
+    if check in UNDECLARABLE:
+        skipped = CHECKS[check](cls, config)
+        if decl is not True and skipped is None:
+            raise _fail(name, f"check_{check}", f"{name}.conformance[{check!r}] = {decl!r}, "
+                        "but this check cannot be skipped or loosened by a declaration"
+                        + ("; only a posterior of kind='optima' (build(..., kind='optima')) "
+                           "is exempt" if check == "gaussian_moments" else ""))
+        return "passed" if skipped is None else f"skipped: {skipped}"
     if decl is False:
         return "skipped: declared"
     opts = decl if isinstance(decl, dict) else {}
-    config = getattr(cls, "conformance", {}).get("quick_config") if quick else None
-    CHECKS[check](cls, config, **opts)
-    return "passed"
+    skipped = CHECKS[check](cls, config, **opts)
+    return "passed" if skipped is None else f"skipped: {skipped}"
 
 
 def check_sampler(sampler: Any, *, quick: bool = True) -> dict[str, str]:
     """Run every conformance check on ``sampler`` (a class or a registered name).
 
-    Returns ``{check: "passed" | "skipped: declared"}``; raises one
+    Returns ``{check: "passed" | "skipped: ..."}``; raises one
     ``AssertionError`` listing every failed check. ``quick=True`` runs with the
     sampler's ``conformance["quick_config"]`` (its defaults otherwise).
     """

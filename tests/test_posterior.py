@@ -180,7 +180,7 @@ def test_to_arviz_rejects_bad_input():
         P.to_arviz({})
     post = make_post()
     post["log_weight"][:] = -np.inf
-    with pytest.raises(ValueError, match="posterior of test.*zero total weight"):
+    with pytest.raises(ValueError, match=r"posterior of test.*zero total weight"):
         P.to_arviz(post)
 
 

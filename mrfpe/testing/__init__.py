@@ -1,6 +1,8 @@
 """Conformance checks shipped for plugin authors (like scikit-learn's ``check_estimator``).
 
-- :mod:`mrfpe.testing.samplers`: :func:`check_sampler` and its individual checks;
+- :mod:`mrfpe.testing.samplers`: :func:`check_sampler`, :func:`run_check` and the checks;
+- :mod:`mrfpe.testing.accuracy`: the two checks no declaration can skip or loosen
+  (:func:`check_gaussian_moments` with ESS-derived tolerances, :func:`check_diagnostics`);
 - :mod:`mrfpe.testing.targets`: the analytic targets they run on.
 
 Everything is re-exported here, so ``from mrfpe.testing import check_sampler`` works.

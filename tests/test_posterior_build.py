@@ -103,3 +103,18 @@ def test_optima_are_diagnosed_but_not_warned_about():
     d = P.diagnose(post)
     assert d["kind"] == "optima" and not d["reliable"]
     assert "not draws from the posterior" in d["messages"][0]
+
+
+def test_distances_refuse_zero_weight_sets_by_name():
+    from mrfpe.distances.base import SampleSet
+
+    good = _build(S=50, d=2)
+    dead = good.assign(log_weight=good["log_weight"] * 0 - np.inf)  # bypassing build
+    with pytest.raises(ValueError, match=r"^b\.log_weight has zero total weight"):
+        mrfpe.distance("kl", good, dead)
+    nan = good.assign(log_weight=good["log_weight"] * np.nan)
+    with pytest.raises(ValueError, match=r"^a\.log_weight has zero total weight: every log "
+                                         r"weight is NaN"):
+        mrfpe.distance("emd", nan, good)
+    with pytest.raises(ValueError, match=r"SampleSet.*zero total weight"):
+        SampleSet(np.zeros((2, 1)), np.full(2, -np.inf), ("x",), good)

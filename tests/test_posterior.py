@@ -172,6 +172,7 @@ def test_to_arviz_chain_layout():
     for k in range(c):
         assert np.array_equal(th[k], post["theta"].values[chain == k])  # draw order kept
     assert list(idata.posterior["chain"].values) == [0, 1, 2]
+    assert "chain" not in P.resample(post, seed=0)  # resampled draws are no longer chains
 
 
 def test_to_arviz_rejects_bad_input():

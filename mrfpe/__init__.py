@@ -54,6 +54,10 @@ def distance(name: str, a: Any, b: Any, **params: Any) -> float:
 def __getattr__(name: str) -> Any:
     if name in _SUBMODULES:
         return importlib.import_module(f"mrfpe.{name}")
+    if name == "PosteriorWarning":
+        from mrfpe.posterior.diagnostics import PosteriorWarning
+
+        return PosteriorWarning
     if name == "Scene":
         from mrfpe.scene import Scene
 

@@ -1,7 +1,9 @@
 """Weights of a particle set and resampling it: a leaf module (numpy and scipy only).
 
 Weight utilities: :func:`normalise_log_weights`, Kish's :func:`ess`,
-:func:`perplexity` and the safe :func:`log_ratio`; and resampling:
+:func:`perplexity`, the safe :func:`log_ratio`, the boundary check
+:func:`check_log_weights` and the importance-sampling evidence estimate
+:func:`log_evidence`; and resampling:
 
 ``resample(log_w, n, method, rng)`` returns ``n`` indices drawn in proportion
 to the weights ``exp(log_w)``. Every scheme is unbiased (each index's expected
@@ -18,6 +20,9 @@ count is ``n · w̃_i``); they differ in variance:
 Degenerate weights are handled, never crashed on: NaN counts as ``-inf``, all
 ``-inf`` weights resample uniformly, a single finite (or ``+inf``) weight takes
 every draw. Zero-weight particles are never selected while some weight is positive.
+That lenience is for internal callers (a sampler mid-run); the posterior boundary
+(:func:`mrfpe.posterior.build`, the distances, ``to_arviz``) refuses a set with
+no positive weight through :func:`check_log_weights`.
 """
 
 from __future__ import annotations
@@ -27,7 +32,8 @@ from typing import Any
 import numpy as np
 from scipy.special import logsumexp
 
-__all__ = ["METHODS", "ess", "log_ratio", "normalise_log_weights", "perplexity", "resample"]
+__all__ = ["METHODS", "check_log_weights", "ess", "log_evidence", "log_ratio",
+           "normalise_log_weights", "perplexity", "resample"]
 
 METHODS = ("multinomial", "systematic", "stratified", "residual")
 
@@ -50,6 +56,82 @@ def normalise_log_weights(log_w: Any) -> np.ndarray:
     with np.errstate(over="ignore"):  # huge gaps underflow to -inf, which is the answer
         lw = lw - np.max(lw)
         return lw - np.log(np.sum(np.exp(lw)))
+
+
+def check_log_weights(log_w: Any, name: str = "log_weight", *,
+                      allow_posinf: bool = True) -> np.ndarray:
+    """Refuse a degenerate weight vector at a public boundary; return it as float64 (S,).
+
+    Parameters
+    ----------
+    log_w : (S,) unnormalised log weights.
+    name : what to call the weights (or the posterior they belong to) in the error.
+    allow_posinf : accept ``+inf`` log weights (they dominate every finite one,
+        :func:`normalise_log_weights`); ``False`` refuses them too.
+
+    Raises
+    ------
+    ValueError
+        If there are no weights, if every log weight is ``-inf`` or NaN (zero
+        total weight: there is no distribution, and a uniform stand-in would be a
+        number made up), or, with ``allow_posinf=False``, if one is ``+inf``.
+    """
+    lw = np.asarray(log_w, dtype=np.float64).reshape(-1)
+    if lw.size == 0:
+        raise ValueError(f"{name} holds no weights")
+    if not allow_posinf and np.isposinf(lw).any():
+        raise ValueError(f"{name} has {int(np.isposinf(lw).sum())} log weight(s) of +inf "
+                         "(an infinite weight: a proposal density of 0 where the target is "
+                         "positive?)")
+    if not (np.isfinite(lw) | np.isposinf(lw)).any():
+        what = "NaN" if np.isnan(lw).all() else "-inf or NaN"
+        raise ValueError(f"{name} has zero total weight: every log weight is {what} "
+                         f"({lw.size} samples); there is no distribution to describe")
+    return lw
+
+
+def log_evidence(log_w: Any) -> tuple[float, float]:
+    """Importance-sampling estimate of a normalising constant and its standard error.
+
+    With draws ``x_i ~ q`` from a *normalised* proposal and unnormalised log
+    weights ``log w_i = log p̃(x_i) - log q(x_i)``, ``Ẑ = mean(w)`` is an unbiased
+    estimate of ``Z = ∫ p̃``. Returned are ``log Ẑ`` and the delta-method
+    standard error of ``log Ẑ``, ``sd(w) / (√S · mean(w))``, which in terms of
+    Kish's ESS is ``√((S/ESS - 1) / (S - 1))`` (0 for equal weights).
+
+    For a pseudolikelihood target this is the normaliser of the
+    pseudolikelihood (tempered by any power), *not* a model evidence: the
+    pseudolikelihood is not a density of the data. It is good for comparing
+    runs on the same target (a sampler that misses mass finds a smaller ``Ẑ``),
+    for checking a proposal against a target whose normaliser is known, and as
+    a tempering diagnostic; not for Bayes factors between MRF models.
+
+    The SE is itself estimated from the weights: with a heavy weight tail (a
+    Pareto k̂ above 0.7, :func:`mrfpe.posterior.diagnose`) both numbers are
+    unreliable, and the SE tends to be too small.
+
+    Parameters
+    ----------
+    log_w : (S,) unnormalised log weights of draws from a normalised proposal.
+        NaN counts as ``-inf`` (zero weight), as in :func:`normalise_log_weights`.
+
+    Returns
+    -------
+    (log_z, se) : floats; ``se`` is NaN for a single sample.
+
+    Raises
+    ------
+    ValueError
+        For an empty vector, any ``+inf`` weight, or zero total weight.
+    """
+    lw = check_log_weights(log_w, "log_w", allow_posinf=False)
+    lw = np.where(np.isnan(lw), -np.inf, lw)
+    S = lw.size
+    log_z = float(logsumexp(lw) - np.log(S))
+    if S < 2:
+        return log_z, float("nan")
+    k = ess(lw)
+    return log_z, float(np.sqrt(max(S / k - 1.0, 0.0) / (S - 1)))
 
 
 def _log_weights(post_or_log_w: Any) -> np.ndarray:

@@ -128,23 +128,72 @@ def test_netcdf_round_trip_is_exact(tmp_path):
     xr.testing.assert_identical(P.load(tmp_path / "again.nc"), post)
 
 
-def test_to_arviz_keeps_weights_in_sample_stats():
+def test_to_arviz_honours_weights_by_default():
     az = pytest.importorskip("arviz")
-    post = make_post()
+    post = make_post(S=400, seed=5)
     idata = P.to_arviz(post)
     assert isinstance(idata, az.InferenceData)
-    assert idata.posterior["theta"].shape == (1, 50, 3)
-    assert np.array_equal(idata.sample_stats["log_weight"].values[0], post["log_weight"].values)
-    assert np.array_equal(idata.sample_stats["lp"].values[0], post["log_target"].values)
+    assert idata.posterior.attrs["mrfpe_weights"] == "resampled"
+    assert idata.posterior["theta"].shape == (1, 400, 3)
+    assert np.allclose(idata.sample_stats["log_weight"], -np.log(400))
+    # the default is the seeded systematic resample, so ArviZ's mean is the resampled mean
+    eq = P.resample(post, seed=0)
+    assert np.array_equal(idata.posterior["theta"].values[0], eq["theta"].values)
+    assert np.array_equal(idata.sample_stats["lp"].values[0], eq["log_target"].values)
+    mean = az.summary(idata, kind="stats")["mean"].to_numpy()
+    # ArviZ's statistic estimates the weighted mean (resampling noise ~ sd/sqrt(ESS))
+    sd = np.sqrt(np.diag(P.weighted_cov(post)))
+    assert np.all(np.abs(mean - P.weighted_mean(post)) < 4 * sd / np.sqrt(P.ess(post)))
     assert list(idata.posterior["param"].values) == ["p0", "p1", "p2"]
-    eq = P.to_arviz(post, resample_to_equal=True, seed=0)
-    assert np.allclose(eq.sample_stats["log_weight"], -np.log(50))
+    assert idata.posterior.attrs["diag_ess"] == post.attrs["diag_ess"]
+
+
+def test_to_arviz_unweighted_export_and_equal_weights():
+    pytest.importorskip("arviz")
+    post = make_post()
+    raw = P.to_arviz(post, resample_to_equal=False)
+    assert raw.posterior.attrs["mrfpe_weights"] == "ignored"
+    assert np.array_equal(raw.sample_stats["log_weight"].values[0], post["log_weight"].values)
+    assert np.array_equal(raw.posterior["theta"].values[0], post["theta"].values)
+    eq = make_post(weighted=False)
+    idata = P.to_arviz(eq)  # equal weights are passed through, not resampled
+    assert idata.posterior.attrs["mrfpe_weights"] == "equal"
+    assert np.array_equal(idata.posterior["theta"].values[0], eq["theta"].values)
+
+
+def test_to_arviz_chain_layout():
+    pytest.importorskip("arviz")
+    S, c = 60, 3
+    chain = np.tile(np.arange(c), S // c)  # interleaved, as MCMC samplers store them
+    post = make_post(S=S, weighted=False, chain=chain)
+    idata = P.to_arviz(post)
+    th = idata.posterior["theta"].values
+    assert th.shape == (3, 20, 3)
+    for k in range(c):
+        assert np.array_equal(th[k], post["theta"].values[chain == k])  # draw order kept
+    assert list(idata.posterior["chain"].values) == [0, 1, 2]
+    assert "chain" not in P.resample(post, seed=0)  # resampled draws are no longer chains
+
+
+def test_to_arviz_rejects_bad_input():
+    pytest.importorskip("arviz")
+    with pytest.raises(ValueError, match="post must be a posterior"):
+        P.to_arviz({})
+    post = make_post()
+    post["log_weight"][:] = -np.inf
+    with pytest.raises(ValueError, match=r"posterior of test.*zero total weight"):
+        P.to_arviz(post)
 
 
 def test_summary_mentions_everything():
     text = P.summary(make_post())
-    for word in ("sampler test", "ESS", "perplexity", "p0", "p2", "MAP", "95%"):
+    for word in ("sampler test", "ESS", "perplexity", "p0", "p2", "MAP", "95%", "Pareto k̂",
+                 "R̂ n/a", "UNRELIABLE", "ESS 25.2 < 100"):
         assert word in text
+    good = P.build(np.random.default_rng(0).random((500, 2)), np.zeros(500),
+                   param_names=["a", "b"], sampler="s", log_evidence=-1.5, log_evidence_se=0.01)
+    text = P.summary(good)
+    assert ": reliable" in text and "log evidence" in text and "-1.5 ± 0.01" in text
 
 
 def _corruptions():
@@ -161,6 +210,15 @@ def _corruptions():
         p.assign_attrs(seed="x")
     yield "JSON", lambda p: p.assign_attrs(config="{not json")
     yield "n_target_evals", lambda p: p.assign_attrs(n_target_evals=-1.0)
+    yield "inf theta", lambda p: p.assign(theta=p["theta"].where(p["theta"] > 0.1, np.inf))
+    yield "all -inf weights", lambda p: p.assign(log_weight=p["log_weight"] * 0 - np.inf)
+    yield "kind", lambda p: p.assign_attrs(kind="guesses")
+    yield "diag_reliable", lambda p: p.assign_attrs(diag_reliable="yes")
+    yield "diag_messages", lambda p: p.assign_attrs(diag_messages=[1, 2])
+    yield "log_evidence", lambda p: p.assign_attrs(log_evidence="big")
+    yield "chain dtype", lambda p: p.assign(chain=(("sample",), np.zeros(p.sizes["sample"])))
+    yield "chain lengths", lambda p: p.assign(
+        chain=(("sample",), (np.arange(p.sizes["sample"]) < 3).astype(np.int64)))
 
 
 @pytest.mark.parametrize(("what", "corrupt"), list(_corruptions()))

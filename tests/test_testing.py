@@ -164,15 +164,134 @@ def test_mostly_minus_inf_check_catches_weight_on_impossible_samples():
 
 def test_declarations_skip_and_tune_checks():
     cls = type("D", (GaussIS,), {"conformance": {
-        "gaussian_moments": False, "two_modes": {"tol": 0.2}}})
+        "two_modes": False, "mostly_minus_inf": False, "bounds": {}}})
     report = T.check_sampler(cls)
-    assert report["gaussian_moments"] == "skipped: declared"
-    assert report["two_modes"] == "passed"
+    assert report["two_modes"] == "skipped: declared"
+    assert report["gaussian_moments"] == "passed" and report["diagnostics"] == "passed"
     bad = type("B", (GaussIS,), {"conformance": {"no_such_check": False}})
     with pytest.raises(AssertionError, match="unknown checks"):
         T.check_sampler(bad)
     with pytest.raises(ValueError, match="unknown check"):
         T.run_check(GaussIS, "nope")
+
+
+@pytest.mark.parametrize("decl", [False, {"z": 100.0}])
+@pytest.mark.parametrize("check", ["gaussian_moments", "diagnostics"])
+def test_moments_and_diagnostics_cannot_be_declared_away(decl, check):
+    cls = type("D", (GaussIS,), {"conformance": {check: decl}})
+    with pytest.raises(AssertionError, match="cannot be skipped or loosened"):
+        T.run_check(cls, check)
+
+
+class Exact(Sampler):
+    """Independent draws from the true Gaussian, optionally shifted/stretched (in sd)."""
+
+    def __init__(self, n_samples: int = 20000, shift: float = 0.0, stretch: float = 1.0,
+                 kind: str = "draws"):
+        self.n_samples = check_positive_int("n_samples", n_samples)
+        for k, v in (("shift", shift), ("stretch", stretch)):
+            if isinstance(v, bool) or not isinstance(v, int | float) or not np.isfinite(v):
+                raise ValueError(f"{k} must be a finite float")
+        if kind not in ("draws", "optima"):
+            raise ValueError("kind must be draws or optima")
+        self.shift, self.stretch, self.kind = float(shift), float(stretch), kind
+
+    def run(self, target, *, seed=None, progress=False, callback=None):
+        t = T.CorrelatedGaussian()
+        rng = np.random.default_rng(seed)
+        z = rng.multivariate_normal(np.zeros(3), t.cov, self.n_samples)
+        x = t.mean + self.shift * t.sd + self.stretch * z
+        lt = t.log_prob(x)
+        return build(x, lt, param_names=t.param_names, sampler="exact",
+                     config=self.get_config(), seed=seed, target=t, kind=self.kind,
+                     n_target_evals=len(x))
+
+
+def _exact(**cfg):
+    return type("E", (Exact,), {"conformance": {"quick_config": cfg}})
+
+
+@pytest.mark.filterwarnings("ignore::mrfpe.posterior.PosteriorWarning")
+@pytest.mark.parametrize(("cfg", "ok"), [
+    ({}, True),
+    # 0.15 sd off: inside the absolute 0.25 sd, but 12 Monte Carlo SEs at ESS 20000
+    ({"shift": 0.15}, False),
+    ({"shift": 0.15, "n_samples": 200}, True),  # at ESS 200 it is within 4 SEs
+    ({"shift": 0.3, "n_samples": 40}, False),  # the absolute bound holds whatever the ESS
+    ({"stretch": 1.08}, False),  # 8 % too wide: far beyond 4 SEs of an sd at ESS 20000
+    ({"stretch": 1.08, "n_samples": 300}, True),
+    ({"stretch": 1.2, "n_samples": 30}, False),  # outside 0.85-1.15
+])
+def test_moment_tolerances_follow_the_ess(cfg, ok):
+    if ok:
+        assert T.run_check(_exact(**cfg), "gaussian_moments") == "passed"
+    else:
+        with pytest.raises(AssertionError, match="check_gaussian_moments failed"):
+            T.run_check(_exact(**cfg), "gaussian_moments")
+
+
+def test_moment_tolerance_closed_forms():
+    corr = np.array([[1.0, 0.6], [0.6, 1.0]])
+    m, s, c = T.moment_tolerances(1600, corr)
+    assert m == pytest.approx(4 / 40 + 0.05) and s == pytest.approx(4 / np.sqrt(3200) + 0.05)
+    assert c[0, 1] == pytest.approx(4 * 0.64 / 40 + 0.05)
+    m, s, c = T.moment_tolerances(4, corr)  # tiny ESS: the absolute bounds
+    assert (m, s) == (0.25, pytest.approx(0.15)) and c[0, 1] == 0.3
+    assert T.moment_tolerances(float("nan"), corr)[0] == 0.25
+
+
+def test_only_optima_are_exempt_from_the_moment_check():
+    opt = _exact(shift=3.0, kind="optima")
+    assert T.run_check(opt, "gaussian_moments").startswith("skipped: optima")
+    declared = type("O", (opt,), {"conformance": {**opt.conformance, "gaussian_moments": False}})
+    assert T.run_check(declared, "gaussian_moments").startswith("skipped: optima")
+
+
+def test_diagnostics_check_catches_missing_or_forged_diagnostics():
+    assert T.run_check(GaussIS, "diagnostics") == "passed"
+
+    class Stripped(GaussIS):
+        def run(self, target, **kw):
+            post = super().run(target, **kw)
+            del post.attrs["diag_pareto_k"]
+            return post
+
+    with pytest.raises(AssertionError, match="lacks the attributes"):
+        T.check_diagnostics(Stripped)
+
+    class Forged(GaussIS):
+        def run(self, target, **kw):
+            post = super().run(target, **kw)
+            post.attrs["diag_ess"] = 1e6
+            return post
+
+    with pytest.raises(AssertionError, match="diag_ess"):
+        T.check_diagnostics(Forged)
+
+
+def test_mostly_minus_inf_accepts_an_honest_refusal_only():
+    class Refuses(GaussIS):
+        def run(self, target, **kw):
+            post = super().run(target, **kw)
+            if isinstance(target, T.MostlyMinusInf):  # as if no sample found the support
+                build(post["theta"].values, np.full(post.sizes["sample"], -np.inf),
+                      param_names=target.param_names, log_weight=np.full(
+                          post.sizes["sample"], -np.inf), sampler="refuses")
+            return post
+
+    T.check_mostly_minus_inf(Refuses)
+    T.check_bounds(Refuses)
+    T.check_netcdf_roundtrip(Refuses)
+
+    class MadeUp(GaussIS):
+        def run(self, target, **kw):
+            post = super().run(target, **kw)
+            post["log_target"][:] = -np.inf
+            post["log_weight"][:] = -np.log(post.sizes["sample"])
+            return post
+
+    with pytest.raises(AssertionError, match="every sample has log_target = -inf"):
+        T.check_mostly_minus_inf(MadeUp)
 
 
 def test_check_sampler_reports_all_failures_at_once():

@@ -52,7 +52,7 @@ from typing import Any, ClassVar
 import numpy as np
 import xarray as xr
 
-from mrfpe.posterior import normalise_log_weights
+from mrfpe.resampling import check_log_weights, normalise_log_weights
 from mrfpe.validation import check_bool
 
 __all__ = ["Distance", "SampleSet", "Similarity", "as_sample_sets", "check_bool"]
@@ -74,6 +74,10 @@ class SampleSet:
     log_weight: np.ndarray
     params: tuple[str, ...]
     source: xr.Dataset
+
+    def __post_init__(self) -> None:
+        # a SampleSet built directly (not through as_sample_sets) must not be degenerate
+        check_log_weights(self.log_weight, f"SampleSet of {list(self.params)}")
 
     @property
     def weight(self) -> np.ndarray:
@@ -122,9 +126,7 @@ def _sample_set(post: Any, name: str, min_samples: int,
         rows = np.flatnonzero(bad)
         raise ValueError(f"{name}.theta has {rows.size} non-finite (NaN/inf) sample(s), "
                          f"e.g. rows {rows[:5].tolist()}; drop them before comparing")
-    lw = np.asarray(post["log_weight"].values, dtype=np.float64)
-    if not (np.isfinite(lw) | np.isposinf(lw)).any():
-        raise ValueError(f"{name} has zero total weight: every log_weight is -inf or NaN")
+    lw = check_log_weights(post["log_weight"].values, f"{name}.log_weight")
     return SampleSet(theta, normalise_log_weights(lw), names, post)
 
 

@@ -220,7 +220,8 @@ class _DynamicWeighting(Sampler):
             lw = stratified_truncation(lw, log_target, n_strata=self.n_strata,
                                        quantile=self.truncation)
         return run.finish(theta, log_target, lw, sampler=self.name, config=self.get_config(),
-                          seed=seed, extra_vars={"acceptance": (("step",), acceptance)})
+                          seed=seed, chain=kept.chain(),
+                          extra_vars={"acceptance": (("step",), acceptance)})
 
     def _initial_log_weight(self, lp: np.ndarray) -> np.ndarray:
         """log Π₀ per chain (7.13 and the variants of ``initial_weight``)."""

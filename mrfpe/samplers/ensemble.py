@@ -101,4 +101,4 @@ class EmceeEnsemble(Sampler):
         extra = {"acceptance": (("step",), acceptance),
                  "autocorr_time": (("param",), np.asarray(tau, float))}
         return run.finish(theta, log_target, None, sampler=self.name, config=self.get_config(),
-                          seed=seed, extra_vars=extra)
+                          seed=seed, chain=kept.chain(), extra_vars=extra)

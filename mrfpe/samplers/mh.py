@@ -128,8 +128,9 @@ class MetropolisHastings(Sampler):
             run.step(t, np.nan, acceptance=float(acceptance[t]), proposal_scale=float(scale))
         theta, log_target, _ = kept.flat()
         return run.finish(theta, log_target, None, sampler=self.name, config=self.get_config(),
-                          seed=seed, extra_vars={"acceptance": (("step",), acceptance),
-                                                 "proposal_scale": (("step",), scales)})
+                          seed=seed, chain=kept.chain(),
+                          extra_vars={"acceptance": (("step",), acceptance),
+                                      "proposal_scale": (("step",), scales)})
 
     @staticmethod
     def _shape(states: np.ndarray, width: np.ndarray) -> np.ndarray | None:

@@ -103,7 +103,7 @@ class _MultiSeed(Sampler):
         extra = {"seed_theta": (("sample", "param"), starts)}
         extra.update({k: (("sample",), np.asarray(v, dtype=np.float64)) for k, v in info.items()})
         return run.finish(opt, lt, lt, sampler=self.name, config=self.get_config(), seed=seed,
-                          extra_vars=extra)
+                          extra_vars=extra, kind="optima")
 
 
 class LMMultiSeed(_MultiSeed):

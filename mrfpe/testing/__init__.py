@@ -1,6 +1,8 @@
 """Conformance checks shipped for plugin authors (like scikit-learn's ``check_estimator``).
 
-- :mod:`mrfpe.testing.samplers`: :func:`check_sampler` and its individual checks;
+- :mod:`mrfpe.testing.samplers`: :func:`check_sampler`, :func:`run_check` and the checks;
+- :mod:`mrfpe.testing.accuracy`: the two checks no declaration can skip or loosen
+  (:func:`check_gaussian_moments` with ESS-derived tolerances, :func:`check_diagnostics`);
 - :mod:`mrfpe.testing.targets`: the analytic targets they run on.
 
 Everything is re-exported here, so ``from mrfpe.testing import check_sampler`` works.
@@ -13,6 +15,7 @@ from mrfpe.testing.samplers import (
     check_bounds,
     check_callback,
     check_config,
+    check_diagnostics,
     check_gaussian_moments,
     check_interface,
     check_map_trace,
@@ -22,13 +25,15 @@ from mrfpe.testing.samplers import (
     check_sampler,
     check_schema,
     check_two_modes,
+    moment_tolerances,
     run_check,
 )
 from mrfpe.testing.targets import CorrelatedGaussian, MostlyMinusInf, TwoModes
 
 __all__ = [
     "CHECKS", "CorrelatedGaussian", "MostlyMinusInf", "TwoModes", "check_bounds",
-    "check_callback", "check_config", "check_gaussian_moments", "check_interface",
-    "check_map_trace", "check_mostly_minus_inf", "check_netcdf_roundtrip",
-    "check_reproducible", "check_sampler", "check_schema", "check_two_modes", "run_check",
+    "check_callback", "check_config", "check_diagnostics", "check_gaussian_moments",
+    "check_interface", "check_map_trace", "check_mostly_minus_inf", "check_netcdf_roundtrip",
+    "check_reproducible", "check_sampler", "check_schema", "check_two_modes",
+    "moment_tolerances", "run_check",
 ]

@@ -17,19 +17,27 @@ Declaring what does not apply
 A sampler may set the class attribute ``conformance``, a dict whose keys are
 check names (see :data:`CHECKS`) and whose values are ``False`` (the check does
 not apply: it is skipped and reported as skipped), or a dict of options for
-that check (e.g. looser tolerances). The special key ``"quick_config"`` holds
-the keyword configuration used when ``quick=True`` (a small budget so the suite
-runs in seconds); without it the defaults are used. Example, for a multi-start
-optimiser whose sample set is a set of optima, not a draw from the target::
+that check (e.g. a looser ``two_modes`` tolerance). The special key
+``"quick_config"`` holds the keyword configuration used when ``quick=True`` (a
+small budget so the suite runs in seconds); without it the defaults are used.
+
+Two checks cannot be declared away or loosened (:data:`UNDECLARABLE`):
+``diagnostics``, and ``gaussian_moments``, whose tolerances come from the
+posterior's own ESS (:func:`moment_tolerances`) within fixed absolute bounds. The
+one exemption from the moment check is a posterior that says it is not a sample:
+a multi-start optimiser builds its posterior with ``kind="optima"``
+(:func:`mrfpe.posterior.build`), and the check reports ``"skipped: optima ..."``::
 
     class MultiStart:
-        conformance = {
-            "quick_config": {"n_seeds": 27},
-            "gaussian_moments": False,   # optima do not sample the moments
-        }
+        conformance = {"quick_config": {"n_seeds": 27}}
+        def run(self, target, *, seed, progress=False, callback=None):
+            ...
+            return build(optima, log_target, ..., kind="optima")
 
-Keep such declarations explicit and explain them in the sampler's docs: a
-skipped check is a documented limitation, not a silent pass.
+A sampler that returns draws but declares ``"gaussian_moments": False`` (or
+tolerances) fails that check, saying so. Keep other declarations explicit and
+explain them in the sampler's docs: a skipped check is a documented limitation,
+not a silent pass.
 """
 
 from __future__ import annotations
@@ -45,51 +53,33 @@ import numpy as np
 import xarray as xr
 
 from mrfpe import posterior as _post
-from mrfpe.targets.base import Target
+from mrfpe.testing._runs import (
+    _cached_run,
+    _declared,
+    _fail,
+    _resolve,
+    _run,
+    _run_or_refusal,
+)
+from mrfpe.testing.accuracy import (
+    CORR_MAX,
+    MEAN_MAX,
+    MOMENT_FLOOR,
+    MOMENT_Z,
+    SD_RATIO_BOUNDS,
+    check_diagnostics,
+    check_gaussian_moments,
+    moment_tolerances,
+)
 from mrfpe.testing.targets import CorrelatedGaussian, MostlyMinusInf, TwoModes
 
 __all__ = [
-    "CHECKS", "check_bounds", "check_callback", "check_config", "check_gaussian_moments",
-    "check_interface", "check_map_trace", "check_mostly_minus_inf", "check_netcdf_roundtrip",
-    "check_reproducible", "check_sampler", "check_schema", "check_two_modes", "run_check",
+    "CHECKS", "CORR_MAX", "MEAN_MAX", "MOMENT_FLOOR", "MOMENT_Z", "SD_RATIO_BOUNDS",
+    "UNDECLARABLE", "check_bounds", "check_callback", "check_config", "check_diagnostics",
+    "check_gaussian_moments", "check_interface", "check_map_trace", "check_mostly_minus_inf",
+    "check_netcdf_roundtrip", "check_reproducible", "check_sampler", "check_schema",
+    "check_two_modes", "moment_tolerances", "run_check",
 ]
-
-
-# --------------------------------------------------------------------------
-def _resolve(sampler: Any) -> tuple[type, str]:
-    if isinstance(sampler, str):
-        from mrfpe.samplers import get
-
-        return get(sampler), sampler
-    if not inspect.isclass(sampler):
-        raise ValueError(f"sampler must be a class or a registered name; got {sampler!r}")
-    return sampler, sampler.__name__
-
-
-def _declared(cls: type, check: str) -> Any:
-    return getattr(cls, "conformance", {}).get(check, True)
-
-
-def _run(cls: type, config: dict | None, target: Target, seed: int, **kw: Any) -> xr.Dataset:
-    return cls(**(config or {})).run(target, seed=seed, progress=kw.pop("progress", False),
-                                     callback=kw.pop("callback", None))
-
-
-_CACHE: dict[tuple, xr.Dataset] = {}
-
-
-def _cached_run(cls: type, config: dict | None, target_cls: type, seed: int) -> xr.Dataset:
-    """One run per (sampler, config, target, seed) and process; returns a deep copy."""
-    key = (cls, json.dumps(config or {}, sort_keys=True, default=repr), target_cls, seed)
-    if key not in _CACHE:
-        if len(_CACHE) > 32:
-            _CACHE.clear()
-        _CACHE[key] = _run(cls, config, target_cls(), seed)
-    return _CACHE[key].copy(deep=True)
-
-
-def _fail(name: str, check: str, msg: str) -> AssertionError:
-    return AssertionError(f"{check} failed for sampler {name}: {msg}")
 
 
 # --------------------------------------------------------------------------
@@ -194,7 +184,10 @@ def check_bounds(sampler: Any, config: dict | None = None) -> None:
     """Samples and the MAP trace lie inside the target's bounds (all three targets)."""
     cls, name = _resolve(sampler)
     for tcls in (CorrelatedGaussian, TwoModes, MostlyMinusInf):
-        post = _cached_run(cls, config, tcls, 0)
+        post = _run_or_refusal(cls, config, tcls, 0) if tcls is MostlyMinusInf else \
+            _cached_run(cls, config, tcls, 0)
+        if post is None:
+            continue
         b = tcls.bounds
         for var in ("theta", "map_theta"):
             x = post[var].values
@@ -202,33 +195,6 @@ def check_bounds(sampler: Any, config: dict | None = None) -> None:
             if bad.any():
                 raise _fail(name, "check_bounds", f"{int(bad.sum())} rows of {var} outside the "
                             f"bounds of {tcls.__name__}, e.g. {x[bad][0]}")
-
-
-def check_gaussian_moments(sampler: Any, config: dict | None = None, *, mean_tol: float = 0.5,
-                           sd_ratio: tuple[float, float] = (0.6, 1.6),
-                           corr_tol: float = 0.3) -> None:
-    """On :class:`CorrelatedGaussian` the weighted mean and covariance are close to the truth.
-
-    Tolerances: ``|mean_i - μ_i| <= mean_tol · sd_i``; each weighted sd within
-    ``sd_ratio`` times the true sd; each correlation within ``corr_tol``.
-    """
-    cls, name = _resolve(sampler)
-    post = _cached_run(cls, config, CorrelatedGaussian, 0)
-    t = CorrelatedGaussian()
-    m, c = _post.weighted_mean(post), _post.weighted_cov(post)
-    err = np.abs(m - t.mean) / t.sd
-    if np.any(err > mean_tol):
-        raise _fail(name, "check_gaussian_moments", f"weighted mean {m.round(4)} vs true "
-                    f"{t.mean}: errors {err.round(2)} sd > {mean_tol} sd")
-    sd = np.sqrt(np.clip(np.diag(c), 0, None))
-    ratio = sd / t.sd
-    if np.any(ratio < sd_ratio[0]) or np.any(ratio > sd_ratio[1]):
-        raise _fail(name, "check_gaussian_moments", f"weighted sd {sd.round(4)} vs true "
-                    f"{t.sd}: ratios {ratio.round(2)} outside {sd_ratio}")
-    corr = c / np.outer(sd, sd)
-    if np.any(np.abs(corr - t.corr) > corr_tol):
-        raise _fail(name, "check_gaussian_moments", f"weighted correlation\n{corr.round(2)}\n"
-                    f"vs true\n{t.corr}\ndiffers by more than {corr_tol}")
 
 
 def check_two_modes(sampler: Any, config: dict | None = None, *, tol: float = 0.05) -> None:
@@ -243,20 +209,28 @@ def check_two_modes(sampler: Any, config: dict | None = None, *, tol: float = 0.
 
 
 def check_mostly_minus_inf(sampler: Any, config: dict | None = None) -> None:
-    """A target that is ``-inf`` almost everywhere is survived: a valid posterior, and
-    samples with ``log_target = -inf`` carry no weight unless every sample does."""
+    """A target that is ``-inf`` almost everywhere is survived: either a valid posterior
+    in which samples with ``log_target = -inf`` carry no weight, or — if no sample found
+    the support — the honest ``ValueError`` of :func:`mrfpe.posterior.build` ("zero
+    total weight"), never another exception or a made-up uniform weighting."""
     cls, name = _resolve(sampler)
     try:
-        post = _cached_run(cls, config, MostlyMinusInf, 0)
+        post = _run_or_refusal(cls, config, MostlyMinusInf, 0)
     except Exception as exc:
         raise _fail(name, "check_mostly_minus_inf", f"raised {type(exc).__name__}: {exc}") from exc
+    if post is None:
+        return
     try:
         _post.validate(post)
     except ValueError as exc:
         raise _fail(name, "check_mostly_minus_inf", str(exc)) from exc
     lt, lw = post["log_target"].values, post["log_weight"].values
+    if not np.isfinite(lt).any():
+        raise _fail(name, "check_mostly_minus_inf", "every sample has log_target = -inf, yet "
+                    "the posterior weights them; a set with no sample in the support must be "
+                    "refused (build raises for all -inf log weights)")
     carrying = int(np.sum(np.isneginf(lt) & np.isfinite(lw)))
-    if np.isfinite(lt).any() and carrying:
+    if carrying:
         raise _fail(name, "check_mostly_minus_inf",
                     f"{carrying} samples with log_target = -inf carry weight")
 
@@ -266,7 +240,10 @@ def check_netcdf_roundtrip(sampler: Any, config: dict | None = None) -> None:
     unchanged (values, dtypes, attributes)."""
     cls, name = _resolve(sampler)
     for tcls in (CorrelatedGaussian, MostlyMinusInf):
-        post = _cached_run(cls, config, tcls, 0)
+        post = _run_or_refusal(cls, config, tcls, 0) if tcls is MostlyMinusInf else \
+            _cached_run(cls, config, tcls, 0)
+        if post is None:
+            continue
         with tempfile.TemporaryDirectory() as tmp:
             path = Path(tmp) / "post.nc"
             _post.save(post, path)
@@ -326,6 +303,7 @@ CHECKS: dict[str, Callable[..., None]] = {
     "reproducible": check_reproducible,
     "bounds": check_bounds,
     "gaussian_moments": check_gaussian_moments,
+    "diagnostics": check_diagnostics,
     "two_modes": check_two_modes,
     "mostly_minus_inf": check_mostly_minus_inf,
     "netcdf_roundtrip": check_netcdf_roundtrip,
@@ -334,25 +312,44 @@ CHECKS: dict[str, Callable[..., None]] = {
 }
 
 
+#: Checks a ``conformance`` declaration may neither skip (``False``) nor tune (options).
+#: ``gaussian_moments`` exempts exactly the posteriors of ``kind="optima"`` by itself.
+UNDECLARABLE = frozenset({"gaussian_moments", "diagnostics"})
+
+
 def run_check(sampler: Any, check: str, *, quick: bool = True) -> str:
-    """Run one named check with the sampler's declarations; returns ``"passed"`` or
-    ``"skipped: declared"`` and raises ``AssertionError`` on failure."""
+    """Run one named check with the sampler's declarations.
+
+    Returns ``"passed"``, ``"skipped: declared"`` (the sampler declared the check not
+    applicable) or ``"skipped: <reason>"`` (the check found it does not apply, e.g.
+    ``gaussian_moments`` on a set of optima); raises ``AssertionError`` on failure,
+    including a declaration that tries to skip or loosen a check in
+    :data:`UNDECLARABLE` for a posterior the check applies to.
+    """
     if check not in CHECKS:
         raise ValueError(f"unknown check {check!r}; checks: {', '.join(CHECKS)}")
-    cls, _ = _resolve(sampler)
+    cls, name = _resolve(sampler)
     decl = _declared(cls, check)
+    config = getattr(cls, "conformance", {}).get("quick_config") if quick else None
+    if check in UNDECLARABLE:
+        skipped = CHECKS[check](cls, config)
+        if decl is not True and skipped is None:
+            raise _fail(name, f"check_{check}", f"{name}.conformance[{check!r}] = {decl!r}, "
+                        "but this check cannot be skipped or loosened by a declaration"
+                        + ("; only a posterior of kind='optima' (build(..., kind='optima')) "
+                           "is exempt" if check == "gaussian_moments" else ""))
+        return "passed" if skipped is None else f"skipped: {skipped}"
     if decl is False:
         return "skipped: declared"
     opts = decl if isinstance(decl, dict) else {}
-    config = getattr(cls, "conformance", {}).get("quick_config") if quick else None
-    CHECKS[check](cls, config, **opts)
-    return "passed"
+    skipped = CHECKS[check](cls, config, **opts)
+    return "passed" if skipped is None else f"skipped: {skipped}"
 
 
 def check_sampler(sampler: Any, *, quick: bool = True) -> dict[str, str]:
     """Run every conformance check on ``sampler`` (a class or a registered name).
 
-    Returns ``{check: "passed" | "skipped: declared"}``; raises one
+    Returns ``{check: "passed" | "skipped: ..."}``; raises one
     ``AssertionError`` listing every failed check. ``quick=True`` runs with the
     sampler's ``conformance["quick_config"]`` (its defaults otherwise).
     """

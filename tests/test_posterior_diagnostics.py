@@ -1,0 +1,136 @@
+"""mrfpe.posterior.diagnose against closed forms: AR(1) chains (ESS = S (1-ρ)/(1+ρ)),
+shifted chains (R̂), Gaussian importance weights (Pareto k = 1 - σ_q²/σ_p²), Kish's ESS."""
+
+import numpy as np
+import pytest
+
+from mrfpe import posterior as P
+from mrfpe.posterior.diagnostics import ESS_MIN, RHAT_MAX, pareto_k_threshold
+
+
+def _post(theta, log_weight=None, **kw):
+    theta = np.asarray(theta, float).reshape(len(theta), -1)
+    with pytest.warns(P.PosteriorWarning) if kw.pop("unreliable", False) else _nothing():
+        return P.build(theta, np.zeros(len(theta)), param_names=[f"p{j}" for j in
+                       range(theta.shape[1])], log_weight=log_weight, sampler="t", **kw)
+
+
+class _nothing:
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+
+def _ar1(n_chains, n_draws, rho, rng, d=2):
+    x = np.empty((n_draws, n_chains, d))
+    x[0] = rng.standard_normal((n_chains, d))
+    for t in range(1, n_draws):
+        x[t] = rho * x[t - 1] + np.sqrt(1 - rho**2) * rng.standard_normal((n_chains, d))
+    # stored as MCMC samplers store them: step-major, chains interleaved
+    return x.reshape(-1, d), np.tile(np.arange(n_chains), n_draws)
+
+
+@pytest.mark.parametrize("rho", [0.0, 0.5, 0.8])
+def test_chain_ess_matches_ar1_closed_form(rho):
+    rng = np.random.default_rng(0)
+    theta, chain = _ar1(4, 2000, rho, rng)
+    d = P.diagnose(_post(theta, chain=chain))
+    expect = theta.shape[0] * (1 - rho) / (1 + rho)
+    assert d["n_chains"] == 4
+    assert 0.75 * expect < d["ess_chain"] < 1.25 * expect
+    assert d["ess"] == d["ess_chain"]  # equal weights: the chain ESS is the ESS
+    assert d["ess_kish"] == pytest.approx(theta.shape[0])
+    assert d["rhat"] < RHAT_MAX and d["reliable"]
+    # independent route: emcee's integrated autocorrelation time
+    import emcee
+
+    tau = emcee.autocorr.integrated_time(theta.reshape(2000, 4, 2), tol=0)
+    assert 0.75 < d["ess_chain"] / (theta.shape[0] / tau.max()) < 1.33
+
+
+def test_without_chain_the_ess_is_kish_and_autocorrelation_is_invisible():
+    theta, _ = _ar1(1, 4000, 0.9, np.random.default_rng(1))
+    d = P.diagnose(_post(theta))
+    assert d["n_chains"] == 0 and np.isnan(d["ess_chain"]) and np.isnan(d["rhat"])
+    assert d["ess"] == pytest.approx(4000)  # documented: pass chain= for MCMC
+
+
+def test_rhat_flags_chains_that_disagree():
+    rng = np.random.default_rng(2)
+    theta, chain = _ar1(4, 1000, 0.5, rng)
+    theta[chain == 3] += 1.0  # one chain in another place
+    d = P.diagnose(_post(theta, chain=chain, unreliable=True))
+    assert d["rhat"] > 1.1 and not d["reliable"]
+    assert any("R̂" in m and "longer chains" in m for m in d["messages"])
+
+
+def test_short_chains_ask_for_longer_chains():
+    theta, chain = _ar1(2, 60, 0.9, np.random.default_rng(3))
+    d = P.diagnose(_post(theta, chain=chain, unreliable=True))
+    assert d["ess"] < ESS_MIN
+    assert any("run longer chains" in m for m in d["messages"])
+
+
+@pytest.mark.filterwarnings("ignore::mrfpe.posterior.PosteriorWarning")
+@pytest.mark.parametrize("sd_q", [0.5, 0.8])
+def test_pareto_k_of_gaussian_importance_weights(sd_q):
+    # draws from N(0, sd_q²) weighted to N(0, 1): the weight tail has k = 1 - sd_q²
+    rng = np.random.default_rng(4)
+    x = rng.normal(0, sd_q, 20000)
+    lw = -0.5 * x**2 + 0.5 * (x / sd_q) ** 2
+    d = P.diagnose(_post(x, lw))
+    assert d["pareto_k"] == pytest.approx(1 - sd_q**2, abs=0.1)
+    assert d["ess"] == pytest.approx(P.ess(lw)) == d["ess_kish"]
+    assert d["reliable"] == (d["pareto_k"] <= 0.7 and d["ess"] >= ESS_MIN)
+    if not d["reliable"]:
+        assert any("Pareto k̂" in m and "soften" in m for m in d["messages"])
+
+
+def test_pareto_k_of_classic_pareto_weights():
+    rng = np.random.default_rng(5)
+    for a in (1.25, 2.5):  # classic Pareto(a) weights: k = 1/a
+        w = rng.pareto(a, 10000) + 1.0
+        post = _post(rng.random(10000), np.log(w), unreliable=a < 1.4)
+        assert P.diagnose(post)["pareto_k"] == pytest.approx(1 / a, abs=0.1)
+
+
+def test_equal_positive_weights_have_no_pareto_k():
+    lw = np.where(np.arange(300) % 3 == 0, -np.inf, 0.0)  # zeros and equal positives
+    d = P.diagnose(_post(np.random.default_rng(6).random(300), lw))
+    assert np.isnan(d["pareto_k"]) and d["ess"] == pytest.approx(200)
+
+
+def test_weighted_chains_multiply_the_efficiencies():
+    rng = np.random.default_rng(7)
+    theta, chain = _ar1(4, 1000, 0.5, rng)
+    lw = rng.normal(0, 0.5, theta.shape[0])
+    d = P.diagnose(_post(theta, lw, chain=chain))
+    assert d["ess"] == pytest.approx(d["ess_chain"] * d["ess_kish"] / theta.shape[0])
+
+
+def test_threshold_and_input_errors():
+    assert pareto_k_threshold(100) == pytest.approx(0.5)
+    assert pareto_k_threshold(10**4) == 0.7 and pareto_k_threshold(5) == 0.0
+    with pytest.raises(ValueError, match="post must be a posterior"):
+        P.diagnose({})
+    post = _post(np.random.default_rng(8).random(200))
+    with pytest.raises(ValueError, match="kind"):
+        P.diagnose(post.assign_attrs(kind="other"))
+    with pytest.raises(ValueError, match="zero total weight"):
+        P.diagnose(post.assign(log_weight=post["log_weight"] * 0 - np.inf))
+
+
+def test_diagnostics_round_trip_through_netcdf(tmp_path):
+    import xarray as xr
+
+    theta, chain = _ar1(3, 300, 0.3, np.random.default_rng(9))
+    post = _post(theta, chain=chain, log_evidence=-1.25, log_evidence_se=0.5)
+    P.save(post, tmp_path / "p.nc")
+    back = P.load(tmp_path / "p.nc")
+    xr.testing.assert_identical(back, post)
+    assert back["chain"].dtype == np.int64
+    assert back.attrs["diag_reliable"] is True and back.attrs["diag_messages"] == []
+    assert back.attrs["kind"] == "draws" and back.attrs["log_evidence"] == -1.25
+    P.validate(back)

@@ -153,9 +153,11 @@ class _DynamicWeighting(Sampler):
     #: target much narrower than the box: with 20000 steps on the conformance
     #: Gaussian (sd 0.04-0.06 in the unit cube) the Kish ESS of the weights is
     #: about 10 and the weighted mean is off by ~0.6 sd (R-type) and ~3 sd
-    #: (Q-type, whose IWIW is only approximate, 5.51). What the method does
+    #: (Q-type, whose IWIW is only approximate, 5.51). ``diagnose`` calls such
+    #: posteriors unreliable (ESS, Pareto k̂) and ``build`` warns; the moment check
+    #: is a known failure (tests/samplers/test_conformance.py). What the method does
     #: guarantee — IWIW — is tested directly (tests/samplers/test_dynamic_weighting.py).
-    conformance: ClassVar[dict] = {"gaussian_moments": False, "quick_config": {"n_steps": 4000}}
+    conformance: ClassVar[dict] = {"quick_config": {"n_steps": 4000}}
 
     def _check_common(self, n_steps: int, n_chains: int, burn_in: int, thin: int,
                       proposal_sd: float, theta: float, delta: float,

@@ -26,18 +26,26 @@ target so sharp that no sampler can explore it. Pass a number to override.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
 from mrfpe.lattice import split_ids
 from mrfpe.targets.base import Target, as_theta_batch
+from mrfpe.targets.budget import check_memory
 from mrfpe.targets.dispatch import pl_terms
 from mrfpe.targets.energy import DATA_TERMS, DataTables, chunk_bounds
+from mrfpe.targets.options import (
+    Option,
+    bool_check,
+    choice_check,
+    number_check,
+    resolve_options,
+)
 from mrfpe.targets.residuals import check_kind, transform
 from mrfpe.targets.tables import fingerprint, tables_for
 
-__all__ = ["BRDFTarget", "auto_sigma_b"]
+__all__ = ["COMMON_OPTIONS", "BRDFTarget", "auto_sigma_b"]
 
 _DTYPES = ("float64", "float32")
 
@@ -61,14 +69,25 @@ def _check_scene(scene: Any) -> None:
         raise ValueError(f"scene must be an mrfpe.scene.Scene; got {type(scene).__name__}")
 
 
-def _positive(name: str, value: Any) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a positive number; got {value!r}") from None
-    if not (np.isfinite(v) and v > 0):
-        raise ValueError(f"{name} must be a positive finite number; got {value!r}")
-    return v
+def _check_sigma_b(name: str, value: Any) -> float | str:
+    if isinstance(value, str):
+        if value != "auto":
+            raise ValueError(f"{name} must be a positive number or 'auto'; got {value!r}")
+        return value
+    return number_check(0.0, np.inf, low_open=True)(name, value)
+
+
+#: Options every BRDF target takes (each variant adds its own, :attr:`BRDFTarget.option_specs`).
+COMMON_OPTIONS: tuple[Option, ...] = (
+    Option("sigma_b", "float > 0 | 'auto'", "auto", _check_sigma_b,
+           "data-energy scale of 4.12; 'auto' from the image's noise and range"),
+    Option("data_term", "'pixel' | 'triplet'", "pixel", choice_check(*DATA_TERMS),
+           "renderer-consistent pixel form or the thesis's literal triplet cliques"),
+    Option("dtype", "'float64' | 'float32'", "float64", choice_check(*_DTYPES),
+           "precision of the tables and kernels"),
+    Option("progress", "bool", False, bool_check,
+           "show a progress bar while the data tables are built"),
+)
 
 
 class BRDFTarget(Target):
@@ -77,6 +96,9 @@ class BRDFTarget(Target):
     Parameters
     ----------
     scene : mrfpe.scene.Scene
+    **options
+        :data:`COMMON_OPTIONS` and the variant's own (``option_specs``; an unknown
+        one raises ValueError listing the valid ones):
     sigma_b : float or "auto"
         Data-energy scale of 4.12 (see :mod:`mrfpe.targets.brdf_target`).
     data_term : "pixel" | "triplet"
@@ -88,6 +110,9 @@ class BRDFTarget(Target):
         (``tests/targets/test_pseudolikelihood.py::test_float32_accuracy``), per-node
         terms are still summed in float64. Coefficients that overflow float32
         (e.g. Ward ``alpha < 1e-19``) give ``-inf``.
+    progress : bool
+        Show a progress bar while the tables are built (a build whose estimated
+        memory exceeds :func:`mrfpe.targets.memory_budget` fails before it starts).
 
     Attributes
     ----------
@@ -103,19 +128,19 @@ class BRDFTarget(Target):
     #: Weights of ``-E_i(x_i)`` and of ``log sum_s exp(-E_i(s))`` in the per-node term.
     _a, _b = 1.0, -1.0
 
-    def __init__(self, scene: Any, *, sigma_b: float | str = "auto", data_term: str = "pixel",
-                 dtype: str = "float64", **options: Any) -> None:
+    #: The options this target accepts (:mod:`mrfpe.targets.options`).
+    option_specs: ClassVar[tuple[Option, ...]] = COMMON_OPTIONS
+    #: What :func:`mrfpe.targets.get` passes as the first argument.
+    data_kind: ClassVar[str] = "scene"
+
+    def __init__(self, scene: Any, **options: Any) -> None:
         _check_scene(scene)
-        if data_term not in DATA_TERMS:
-            raise ValueError(f"data_term must be one of {DATA_TERMS}; got {data_term!r}")
-        if dtype not in _DTYPES:
-            raise ValueError(f"dtype must be one of {_DTYPES}; got {dtype!r}")
-        if isinstance(sigma_b, str):
-            if sigma_b != "auto":
-                raise ValueError(f"sigma_b must be a positive number or 'auto'; got {sigma_b!r}")
-            sigma = auto_sigma_b(scene)
-        else:
-            sigma = _positive("sigma_b", sigma_b)
+        opts = resolve_options(self.name or type(self).__name__, self.option_specs, options)
+        sigma_b = opts.pop("sigma_b")
+        data_term = opts.pop("data_term")
+        dtype = opts.pop("dtype")
+        progress = opts.pop("progress")
+        sigma = auto_sigma_b(scene) if sigma_b == "auto" else sigma_b
         self.scene = scene
         self.model = scene.model
         self.param_names = tuple(self.model.param_names)
@@ -123,8 +148,8 @@ class BRDFTarget(Target):
         self.sigma_b = sigma
         self.data_term = data_term
         self.dtype = dtype
-        self.options = self._check_options(scene, options)
-        tables = tables_for(scene, data_term, dtype)
+        self.options = self._check_options(scene, opts)
+        tables = tables_for(scene, data_term, dtype, progress=progress)
         unary, const = self._unary(scene)
         n = scene.lattice.n_nodes
         B = scene.n_labels
@@ -143,10 +168,11 @@ class BRDFTarget(Target):
 
     # -- construction helpers ---------------------------------------------------------
     def _check_options(self, scene: Any, options: dict) -> dict:
-        if options:
-            raise ValueError(f"{self.name} takes no options {sorted(options)}; common options "
-                             "are sigma_b, data_term, dtype")
-        return {}
+        """Scene-dependent checks of the variant's own (already value-checked) options.
+
+        Returns the dict recorded as ``self.options`` (and in ``describe()``).
+        """
+        return dict(options)
 
     def _unary(self, scene: Any) -> tuple[np.ndarray, np.ndarray]:
         """Theta-independent energies E0 (H+1, W+1, B) and per-node constants."""
@@ -202,6 +228,15 @@ class BRDFTarget(Target):
         res[bad] = -np.inf
         return res
 
+    def _row_bytes(self) -> float:
+        # per particle: the kernel's per-chunk partial sums, coefficients (3 copies), results
+        return 8.0 * (self._chunks.shape[0] - 1) + 8.0 * 5 * 3 + 16.0
+
+    def _check_per_node_memory(self, n: int, what: str) -> None:
+        check_memory(8.0 * 3 * n * max(1, self._tables.n_nodes),
+                     f"{type(self).__name__}.{what} on {n} parameter vectors "
+                     f"x {self._tables.n_nodes} nodes", "evaluate fewer at a time")
+
     def _log_prob(self, theta: np.ndarray) -> np.ndarray:
         if self._tables.n_nodes == 0:
             return np.zeros(theta.shape[0])
@@ -213,6 +248,7 @@ class BRDFTarget(Target):
         if not np.all(self.in_bounds(theta)):
             raise ValueError(f"theta must lie in the unit cube {self.bounds.tolist()} for "
                              "node_terms")
+        self._check_per_node_memory(theta.shape[0], "node_terms")
         return self._terms(theta, per_node=True)
 
     def residuals(self, theta: Any, kind: str = "inverse") -> np.ndarray:
@@ -231,6 +267,7 @@ class BRDFTarget(Target):
         check_kind(kind)
         single = np.ndim(theta) == 1
         theta = as_theta_batch(theta, self.ndim)
+        self._check_per_node_memory(theta.shape[0], "residuals")
         out = np.full((theta.shape[0], self._tables.n_nodes), np.inf)
         inside = self.in_bounds(theta)
         if inside.any() and self._tables.n_nodes:

@@ -35,12 +35,13 @@ A student can draw data at known parameters, then compare the PL maximiser
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
 from mrfpe.lattice import split_ids
 from mrfpe.targets.base import Target, as_theta_batch
+from mrfpe.targets.options import Option, optional
 
 __all__ = [
     "PottsExactLikelihood",
@@ -101,6 +102,29 @@ def _bounds(bounds: Any, q: int) -> np.ndarray:
     return b
 
 
+def _check_n_states(name: str, value: Any) -> int:
+    return _check_states(value)
+
+
+def _check_bounds_value(name: str, value: Any) -> np.ndarray:
+    try:
+        b = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a finite (q, 2) array; got {value!r}") from None
+    if b.ndim != 2 or b.shape[1] != 2:
+        raise ValueError(f"{name} must be a finite (q, 2) array; got shape {b.shape}")
+    return b
+
+
+#: Options of the Potts targets (the shape of ``bounds`` is checked against ``q`` later).
+POTTS_OPTIONS: tuple[Option, ...] = (
+    Option("n_states", "int >= 2 | None", None, optional(_check_n_states),
+           "q; inferred as max(state) + 1 (at least 2) if None"),
+    Option("bounds", "(q, 2) array | None", None, optional(_check_bounds_value),
+           "sampling-space bounds of (coupling, fields); default [-2, 2] and [-3, 3]"),
+)
+
+
 def neighbour_counts(x: np.ndarray, n_states: int) -> np.ndarray:
     """``n_i(a)``: first-order neighbours of each site in each state, (M, H, W, q)."""
     x = np.asarray(x)
@@ -146,6 +170,10 @@ class PottsPseudoLikelihood(Target):
     """
 
     name = "potts"
+    #: The options this target accepts (:mod:`mrfpe.targets.options`).
+    option_specs: ClassVar[tuple[Option, ...]] = POTTS_OPTIONS
+    #: What :func:`mrfpe.targets.get` passes as the first argument.
+    data_kind: ClassVar[str] = "configurations"
 
     def __init__(self, configurations: Any, n_states: int | None = None,
                  bounds: Any = None) -> None:
@@ -172,6 +200,9 @@ class PottsPseudoLikelihood(Target):
             self._rows, self._weight = np.unique(rows, axis=0, return_counts=True)
         else:
             self._rows, self._weight = np.zeros((0, q + 1), dtype=np.int64), np.zeros(0, int)
+
+    def _row_bytes(self) -> float:
+        return 8.0 * 4 * self._rows.shape[0] * self.n_states
 
     def _log_prob(self, theta: np.ndarray) -> np.ndarray:
         if self._rows.shape[0] == 0:
@@ -213,6 +244,8 @@ class PottsExactLikelihood(Target):
     """
 
     name = "potts_exact"
+    option_specs: ClassVar[tuple[Option, ...]] = POTTS_OPTIONS
+    data_kind: ClassVar[str] = "configurations"
 
     def __init__(self, configurations: Any, n_states: int | None = None,
                  bounds: Any = None) -> None:
@@ -243,6 +276,9 @@ class PottsExactLikelihood(Target):
         theta = as_theta_batch(theta, self.ndim)
         e = theta @ self._stats.T + np.log(self._mult)[None, :]
         return _logsumexp(e, axis=1)
+
+    def _row_bytes(self) -> float:
+        return 8.0 * 3 * self._stats.shape[0]
 
     def _log_prob(self, theta: np.ndarray) -> np.ndarray:
         return theta @ self._stats_obs - self._n_obs * self.log_partition(theta)

@@ -42,7 +42,8 @@ from typing import Any
 
 import numpy as np
 
-from mrfpe.targets.brdf_target import BRDFTarget, _positive, auto_sigma_b
+from mrfpe.targets.brdf_target import COMMON_OPTIONS, BRDFTarget, auto_sigma_b
+from mrfpe.targets.options import Option, bool_check, choice_check, number_check, optional
 from mrfpe.targets.residuals import RESIDUAL_KINDS
 
 __all__ = [
@@ -56,6 +57,18 @@ __all__ = [
     "ImageFit",
     "auto_sigma_b",
 ]
+
+
+_positive = number_check(0.0, np.inf, low_open=True)
+_unit_open = number_check(0.0, 1.0, high_open=True)
+
+
+def _array(name: str, value: Any) -> np.ndarray:
+    try:
+        return np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be an array of numbers; got {type(value).__name__}") \
+            from None
 
 
 def _robust(x: np.ndarray, sigma: float, e: float) -> np.ndarray:
@@ -83,19 +96,15 @@ class PLS(BRDFTarget):
 
     name = "pls"
 
+    option_specs = (*COMMON_OPTIONS,
+                    Option("prior_weight", "float >= 0", 1.0, number_check(0.0),
+                           "multiplies the range potentials psi_i of 7.4 (1: PL_s)"))
+
     def _check_options(self, scene: Any, options: dict) -> dict:
-        opts = dict(options)
-        w = opts.pop("prior_weight", 1.0)
-        if opts:
-            raise ValueError(f"pls options are prior_weight, sigma_b, data_term, dtype; "
-                             f"got unknown {sorted(opts)}")
         if scene.range_prior is None:
             raise ValueError("scene has no range_prior; pls (7.5-7.7) needs the range "
                              "potentials psi_i of 7.4 (mrfpe.synthetic.make_scene sets them)")
-        w = float(w)
-        if not (np.isfinite(w) and w >= 0):
-            raise ValueError(f"prior_weight must be finite and >= 0; got {w!r}")
-        return {"prior_weight": w}
+        return {"prior_weight": options["prior_weight"]}
 
     def _unary(self, scene):
         n = scene.lattice.n_nodes
@@ -120,14 +129,13 @@ class PL3(BRDFTarget):
 
     name = "pl3"
 
+    option_specs = (*COMMON_OPTIONS,
+                    Option("beliefs", "(H+1, W+1, B) array | None", None, optional(_array),
+                           "per-node label beliefs b_i (default: scene.beliefs)"),
+                    Option("temperature", "float > 0", 1.0, _positive, "T of 6.60"))
+
     def _check_options(self, scene: Any, options: dict) -> dict:
-        opts = dict(options)
-        beliefs = opts.pop("beliefs", None)
-        T = opts.pop("temperature", 1.0)
-        if opts:
-            raise ValueError(f"pl3 options are beliefs, temperature, sigma_b, data_term, dtype; "
-                             f"got unknown {sorted(opts)}")
-        T = _positive("temperature", T)
+        beliefs, T = options["beliefs"], options["temperature"]
         shape = (*scene.lattice.node_shape, scene.n_labels)
         if beliefs is None:
             if scene.beliefs is None:
@@ -187,25 +195,24 @@ class PL2(BRDFTarget):
 
     name = "pl2"
 
+    option_specs = (
+        *COMMON_OPTIONS,
+        Option("smoothness", "bool", True, bool_check, "include V^B (6.57)"),
+        Option("smoothness_sigma", "float > 0", 1.0, _positive, "sigma_p of 6.24, label steps"),
+        Option("smoothness_e", "float in [0, 1)", 0.01, _unit_open, "e_p of 6.24"),
+        Option("pairwise_on", "'range' | 'label'", "range", choice_check("range", "label"),
+               "what d of 6.24 measures: the node's range or the label index"),
+        Option("match_cost", "(H+1, W+1, B) array | None", None, optional(_array),
+               "stereo match cost F of 6.5 (default: scene.match_cost, else omitted)"),
+        Option("match_sigma", "float > 0", 1.0, _positive, "sigma_d of 6.23"),
+        Option("match_e", "float in [0, 1)", 0.01, _unit_open, "e_d of 6.23"),
+    )
+
     def _check_options(self, scene: Any, options: dict) -> dict:
-        opts = dict(options)
-        smooth = bool(opts.pop("smoothness", True))
-        sp = _positive("smoothness_sigma", opts.pop("smoothness_sigma", 1.0))
-        ep = float(opts.pop("smoothness_e", 0.01))
-        on = opts.pop("pairwise_on", "range")
-        mc = opts.pop("match_cost", None)
-        sd = _positive("match_sigma", opts.pop("match_sigma", 1.0))
-        ed = float(opts.pop("match_e", 0.01))
-        if opts:
-            raise ValueError(
-                "pl2 options are smoothness, smoothness_sigma, smoothness_e, pairwise_on, "
-                f"match_cost, match_sigma, match_e, sigma_b, data_term, dtype; got unknown "
-                f"{sorted(opts)}")
-        for nm, e in (("smoothness_e", ep), ("match_e", ed)):
-            if not 0 <= e < 1:
-                raise ValueError(f"{nm} must lie in [0, 1); got {e!r}")
-        if on not in ("range", "label"):
-            raise ValueError(f"pairwise_on must be 'range' or 'label'; got {on!r}")
+        o = options
+        smooth, sp, ep, on = (o["smoothness"], o["smoothness_sigma"], o["smoothness_e"],
+                              o["pairwise_on"])
+        mc, sd, ed = o["match_cost"], o["match_sigma"], o["match_e"]
         shape = (*scene.lattice.node_shape, scene.n_labels)
         source = None
         if mc is None and getattr(scene, "match_cost", None) is not None:
@@ -277,15 +284,13 @@ class CompositeMarginalLikelihood(BRDFTarget):
     name = "pml"
     _a, _b = 0.0, 1.0
 
+    option_specs = (*COMMON_OPTIONS,
+                    Option("prior", "'auto' | 'range' | 'beliefs' | 'none'", "auto",
+                           choice_check("auto", "range", "beliefs", "none"),
+                           "the node prior p0 the label is marginalised under"))
+
     def _check_options(self, scene: Any, options: dict) -> dict:
-        opts = dict(options)
-        prior = opts.pop("prior", "auto")
-        if opts:
-            raise ValueError(f"pml options are prior, sigma_b, data_term, dtype; got unknown "
-                             f"{sorted(opts)}")
-        choices = ("auto", "range", "beliefs", "none")
-        if prior not in choices:
-            raise ValueError(f"prior must be one of {choices}; got {prior!r}")
+        prior = options["prior"]
         if prior == "auto":
             prior = ("range" if scene.range_prior is not None
                      else "beliefs" if scene.beliefs is not None else "none")

@@ -29,7 +29,11 @@ def as_theta_batch(theta: Any, d: int, name: str = "theta") -> np.ndarray:
         If the trailing dimension is not ``d``, the array has more than two
         dimensions, or any entry is NaN.
     """
-    arr = np.asarray(theta, dtype=np.float64)
+    try:
+        arr = np.asarray(theta, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be an (N, {d}) or ({d},) array of numbers; got "
+                         f"{type(theta).__name__} {theta!r:.60}") from None
     if arr.ndim == 1:
         arr = arr[None, :]
     if arr.ndim != 2 or arr.shape[1] != d:

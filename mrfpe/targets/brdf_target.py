@@ -148,6 +148,10 @@ class BRDFTarget(Target):
         self.sigma_b = sigma
         self.data_term = data_term
         self.dtype = dtype
+        if self._a != 0 and self._b != 0 and scene.n_labels < 2:
+            raise ValueError(f"{self.name}: the scene has n_labels=1; a pseudolikelihood needs "
+                             "n_labels >= 2 (with one label log p(x_i | x_N_i) = 0 for every "
+                             "theta)")
         self.options = self._check_options(scene, opts)
         tables = tables_for(scene, data_term, dtype, progress=progress)
         unary, const = self._unary(scene)

@@ -42,6 +42,7 @@ import numpy as np
 from mrfpe.lattice import split_ids
 from mrfpe.targets.base import Target, as_theta_batch
 from mrfpe.targets.options import Option, optional
+from mrfpe.validation import check_seed
 
 __all__ = [
     "PottsExactLikelihood",
@@ -333,7 +334,7 @@ def gibbs_sample(theta: Any, shape: tuple[int, int], n_states: int = 2, *, n_sam
                            ("thin", thin, 1)):
         if isinstance(val, bool) or not isinstance(val, int | np.integer) or val < low:
             raise ValueError(f"{name} must be an integer >= {low}; got {val!r}")
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(check_seed(seed))
     if isinstance(init, str):
         if init != "random":
             raise ValueError(f"init must be 'random' or an (H, W) configuration; got {init!r}")

@@ -64,6 +64,10 @@ class Target:
     param_names: tuple[str, ...] = ()
     bounds: np.ndarray = np.zeros((0, 2))
     cost: float = 1.0
+    #: Declared keyword options (:class:`mrfpe.targets.options.Option`); none by default.
+    option_specs: tuple = ()
+    #: What :func:`mrfpe.targets.get` passes as the first argument ("scene", "configurations").
+    data_kind: str = "data"
 
     @property
     def ndim(self) -> int:

@@ -59,3 +59,16 @@ def test_declared_skip_and_unknown():
         check_distance(bad)
     with pytest.raises(ValueError, match="distance must be"):
         check_distance(3)
+
+
+def test_pairwise_arguments_are_checked_before_work():
+    from ._helpers import random_post
+
+    a = random_post(np.random.default_rng(0))
+    dist = D.get("emd")()
+    for kw, word in [({"n_jobs": "x"}, "n_jobs"), ({"n_jobs": 0}, "n_jobs"),
+                     ({"progress": "x"}, "progress")]:
+        with pytest.raises(ValueError, match=word):
+            dist.pairwise([a, a], **kw)
+    with pytest.raises(ValueError, match="posteriors must be a sequence"):
+        dist.pairwise(a)

@@ -208,7 +208,8 @@ def test_bad_parameters_raise(name, params):
         mrfpe.distance(name, a, b, **params)
 
 
-@pytest.mark.parametrize("name", ["matusita", "bhattacharyya", "chernoff", "symmetric_kl"])
+@pytest.mark.parametrize("name", ["matusita", "bhattacharyya", "chernoff", "symmetric_kl",
+                                  "patrick_fisher"])
 def test_identical_rank_deficient_sets_are_at_distance_zero(name):
     """Found by hypothesis: with a singular covariance, eigen- and Cholesky log-determinants
     differed by ~1e-7, which Matusita's square root turned into d(a, a) = 2e-4."""

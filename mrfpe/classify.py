@@ -26,6 +26,8 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
+from mrfpe.validation import check_bool
+
 __all__ = [
     "confusion_matrix", "error_stats", "knn_accuracy", "knn_predict", "plot_similarity",
     "similarity_matrix",
@@ -46,6 +48,12 @@ def similarity_matrix(posteriors: Sequence[Any], name: str, *, n_jobs: int = 1,
     from mrfpe.distances import get
     from mrfpe.distances.base import Distance, pair_loop
 
+    if isinstance(posteriors, str) or not hasattr(posteriors, "__iter__"):
+        raise ValueError(f"posteriors must be a sequence of posterior Datasets; got "
+                         f"{type(posteriors).__name__}")
+    if not isinstance(name, str):
+        raise ValueError(f"name must be a registered distance name (str); got {name!r}")
+    check_bool("progress", progress)
     posteriors = list(posteriors)
     if len(posteriors) < 1:
         raise ValueError("posteriors must hold at least one posterior")
@@ -63,7 +71,11 @@ def similarity_matrix(posteriors: Sequence[Any], name: str, *, n_jobs: int = 1,
 
 
 def _check_matrix(S: Any, classes: Any) -> tuple[np.ndarray, np.ndarray]:
-    S = np.asarray(S, dtype=np.float64)
+    try:
+        S = np.asarray(S, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"S must be a square matrix of numbers; got {type(S).__name__}") \
+            from None
     if S.ndim != 2 or S.shape[0] != S.shape[1]:
         raise ValueError(f"S must be a square similarity matrix; got shape {S.shape}")
     labels = np.asarray(classes)

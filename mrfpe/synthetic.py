@@ -21,6 +21,7 @@ from mrfpe.geometry import AffineCamera, DirectionalLight, PointLight, Projectiv
 from mrfpe.lattice import Lattice
 from mrfpe.scene import Scene
 from mrfpe.shading import pixel_intensity, radiance, triangle_geometry
+from mrfpe.validation import check_seed
 
 __all__ = ["LIGHT_CONE_DEG", "make_scene", "random_light", "render", "surface_ranges"]
 
@@ -129,12 +130,26 @@ def _int_param(x: Any, name: str, low: int) -> int:
 
 
 def _pos_float(x: Any, name: str, allow_zero: bool = False) -> float:
+    if isinstance(x, bool | np.bool_ | str):
+        raise ValueError(f"{name} must be a number; got {x!r}")
     try:
         val = float(x)
     except (TypeError, ValueError):
         raise ValueError(f"{name} must be a number; got {x!r}") from None
     if not np.isfinite(val) or val < 0 or (val == 0 and not allow_zero):
         raise ValueError(f"{name} must be finite and {'>=' if allow_zero else '>'} 0; got {x!r}")
+    return val
+
+
+def _finite_float(x: Any, name: str) -> float:
+    if isinstance(x, bool | np.bool_ | str):
+        raise ValueError(f"{name} must be a finite number or None; got {x!r}")
+    try:
+        val = float(x)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a finite number or None; got {x!r}") from None
+    if not np.isfinite(val):
+        raise ValueError(f"{name} must be finite; got {x!r}")
     return val
 
 
@@ -155,7 +170,7 @@ def make_scene(brdf: str = "ward", theta: Any = None, shape: tuple[int, int] = (
     shape : (H, W)
         Image size in pixels (the thesis uses 100 x 100).
     n_labels : int
-        B, candidate labels per node.
+        B >= 2, candidate labels per node (one label gives a pseudolikelihood of 0).
     surface : "smooth" | "jagged"
         See :func:`surface_ranges` (the thesis uses smooth for Ward, jagged for Phong).
     light : DirectionalLight, PointLight or None
@@ -200,7 +215,11 @@ def make_scene(brdf: str = "ward", theta: Any = None, shape: tuple[int, int] = (
     if theta is None:
         raise ValueError(f"theta is required: the true {model.name} parameters "
                          f"{model.param_names} in natural units")
-    theta_arr = np.asarray(theta, dtype=np.float64)
+    try:
+        theta_arr = np.asarray(theta, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"theta must be {model.d} numbers {model.param_names} in natural "
+                         f"units; got {theta!r}") from None
     if theta_arr.shape != (model.d,):
         raise ValueError(f"theta must have shape ({model.d},) for {model.name} "
                          f"{model.param_names}; got {theta_arr.shape}")
@@ -211,11 +230,15 @@ def make_scene(brdf: str = "ward", theta: Any = None, shape: tuple[int, int] = (
         raise ValueError(f"shape must be (H, W); got {shape!r}") from None
     if H < 1 or W < 1 or tuple(shape) != (H, W):
         raise ValueError(f"shape must be (H, W) with integers >= 1; got {shape!r}")
-    B = _int_param(n_labels, "n_labels", 1)
+    seed = check_seed(seed)
+    # B >= 2: with one label the pseudolikelihood is identically 0 (no alternative label)
+    B = _int_param(n_labels, "n_labels", 2)
     step_px = _pos_float(label_step, "label_step")
     sigma_lab = B / 5.0 if prior_sigma is None else _pos_float(prior_sigma, "prior_sigma")
     noise = _pos_float(noise, "noise", allow_zero=True)
     n_ctrl = _int_param(n_control_points, "n_control_points", 3)
+    if depth is not None:
+        depth = _finite_float(depth, "depth")
     if surface not in ("smooth", "jagged"):
         raise ValueError(f"surface must be 'smooth' or 'jagged'; got {surface!r}")
     if camera is None:

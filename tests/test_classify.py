@@ -282,3 +282,19 @@ def test_plot_outlines_each_class_block():
     plt.close("all")
     with pytest.raises(ValueError, match="one label per row"):
         plot_similarity(S, classes[:3])
+
+
+def test_bad_arguments_are_named_before_work():
+    import numpy as _np
+    import pytest as _pytest
+
+    from mrfpe.classify import knn_predict, similarity_matrix
+
+    with _pytest.raises(ValueError, match="S must be a square matrix"):
+        knn_predict("abc", [1])
+    with _pytest.raises(ValueError, match="name must be a registered distance"):
+        similarity_matrix([], 3)
+    with _pytest.raises(ValueError, match="posteriors must be a sequence"):
+        similarity_matrix("abc", "kl")
+    with _pytest.raises(ValueError, match="progress"):
+        similarity_matrix([_np.zeros(2)], "kl", progress="yes")

@@ -133,3 +133,43 @@ def test_arrays_read_only():
     L = Lattice(2, 2)
     with pytest.raises(ValueError):
         L.triangles[0, 0] = 5
+
+
+def test_split_ids_is_the_one_rule():
+    from mrfpe.lattice import split_ids
+
+    ids = np.arange(10, 23)
+    for kind in ("strided", "block"):
+        for k in (1, 2, 5, 13):
+            parts = split_ids(ids, k, kind)
+            assert len(parts) == k
+            assert np.array_equal(np.sort(np.concatenate(parts)), ids)  # disjoint, covering
+            assert all(p.size >= 1 for p in parts)
+    assert [p.tolist() for p in split_ids(ids[:5], 2, "strided")] == [[10, 12, 14], [11, 13]]
+    assert [p.tolist() for p in split_ids(ids[:5], 2, "block")] == [[10, 11, 12], [13, 14]]
+    for bad in (0, 14, 2.0, True):
+        with pytest.raises(ValueError, match="k must be"):
+            split_ids(ids, bad)
+    with pytest.raises(ValueError, match="kind must be"):
+        split_ids(ids, 2, "random")
+
+
+def test_every_partition_uses_split_ids():
+    from mrfpe.lattice import Lattice, split_ids
+    from mrfpe.targets import get
+    from mrfpe.targets.potts import gibbs_sample
+    from mrfpe.testing import CorrelatedGaussian
+
+    lat = Lattice(3, 4)
+    for kind in ("strided", "block"):
+        want = split_ids(np.arange(lat.n_nodes), 3, kind)
+        assert all(np.array_equal(a, b) for a, b in zip(lat.partition(3, kind), want,
+                                                        strict=True))
+        x = gibbs_sample([0.3, 0.0], (3, 4), seed=0)
+        sites = [p.sites for p in get("potts", x).partition(3, kind)]
+        assert all(np.array_equal(a, b) for a, b in zip(sites, split_ids(np.arange(12), 3,
+                                                                         kind), strict=True))
+        g = CorrelatedGaussian(12)
+        obs = [p.obs for p in g.partition(3, kind)]
+        assert all(np.array_equal(a, g.obs[b]) for a, b in zip(obs, split_ids(np.arange(12), 3,
+                                                                           kind), strict=True))

@@ -174,8 +174,8 @@ def test_bad_shape():
         _ward(shape=(0, 5))
 
 
-def test_zero_labels():
-    with pytest.raises(ValueError, match="n_labels must be an integer >= 1"):
+def test_too_few_labels():
+    with pytest.raises(ValueError, match="n_labels must be an integer >= 2"):
         _ward(n_labels=0)
 
 
@@ -207,3 +207,18 @@ def test_bad_control_points():
 def test_render_bad_points():
     with pytest.raises(ValueError, match="points must have shape"):
         synthetic.render("ward", [0.5, 0.5, 0.2], np.zeros((4, 3)), None, None)
+
+
+@pytest.mark.parametrize("kw, word", [
+    ({"n_labels": 1}, "n_labels must be an integer >= 2"),
+    ({"seed": "abc"}, "seed must be"),
+    ({"seed": 1.5}, "seed must be"),
+    ({"theta": "abc"}, "theta must be 3 numbers"),
+    ({"label_step": True}, "label_step must be a number"),
+    ({"depth": "x"}, "depth must be"),
+    ({"noise": "x"}, "noise must be a number"),
+])
+def test_bad_arguments_are_named(kw, word):
+    args = {"brdf": "ward", "theta": [0.5, 0.5, 0.1], "shape": (2, 2), "n_labels": 3, **kw}
+    with pytest.raises(ValueError, match=word):
+        synthetic.make_scene(**args)

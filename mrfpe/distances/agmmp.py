@@ -49,42 +49,31 @@ from __future__ import annotations
 from typing import Any, ClassVar
 
 import numpy as np
-from scipy.spatial.distance import cdist
 
 from mrfpe.distances.base import SampleSet, Similarity
+from mrfpe.mixture import log_mixture_density as shared_log_mixture_density
 from mrfpe.validation import check_choice, check_range
 
 __all__ = ["AGMMP", "log_mixture_density", "set_log_likelihood"]
-
-_BLOCK = 1 << 20  # distance-matrix entries per block (8 MB)
-
 
 def log_mixture_density(x: np.ndarray, y: np.ndarray, log_wy: np.ndarray,
                         sigma: float) -> np.ndarray:
     """``log Σⱼ exp(log_wyⱼ) N(xᵢ; yⱼ, σI)`` for every row of ``x`` (Eqs. 8.3-8.5).
 
-    ``x`` (N, d), ``y`` (M, d), ``log_wy`` (M,) normalised log weights; the
-    squared distances come from :func:`scipy.spatial.distance.cdist` (no
-    cancellation for nearby points), in blocks of rows to bound memory.
+    ``x`` (N, d), ``y`` (M, d), ``log_wy`` (M,) normalised log weights, ``σ`` the
+    component *variance* (Eq. 8.4). Computed by the shared
+    :func:`mrfpe.mixture.log_mixture_density` with scale ``sqrt(σ)``, which takes
+    the differences ``xᵢ − yⱼ`` directly (no ``|x|² + |y|² − 2x·y`` cancellation
+    for near-coincident points) and bounds memory by chunking;
+    ``tests/distances/test_agmmp.py`` checks it against a cdist-based route to 1e-10.
     """
     keep = np.isfinite(log_wy)  # zero-weight components add nothing to the mixture
     if not keep.any():
         raise ValueError("log_wy must hold at least one finite log weight")
-    y, log_wy = y[keep], log_wy[keep]
-    n, d = x.shape
-    out = np.empty(n)
-    rows = max(1, _BLOCK // max(1, y.shape[0]))
-    for k in range(0, n, rows):
-        a = cdist(x[k:k + rows], y, "sqeuclidean")
-        a *= -0.5 / sigma
-        a += log_wy[None, :]
-        # log-sum-exp by rows, in place (3x faster than scipy's generic one); the
-        # row maxima are finite because the kept log_wy are
-        top = a.max(axis=1, keepdims=True)
-        a -= top
-        np.exp(a, out=a)
-        out[k:k + rows] = top[:, 0] + np.log(a.sum(axis=1))
-    return out - 0.5 * d * np.log(2.0 * np.pi * sigma)
+    return shared_log_mixture_density(np.asarray(x, dtype=np.float64),
+                                      np.asarray(y, dtype=np.float64)[keep],
+                                      np.asarray(log_wy, dtype=np.float64)[keep],
+                                      float(np.sqrt(sigma)))
 
 
 def set_log_likelihood(lp: np.ndarray, log_wx: np.ndarray, form: str) -> float:

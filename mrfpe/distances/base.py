@@ -224,8 +224,14 @@ class Distance:
         ``joblib.parallel_config(backend="loky")`` for processes); vectorised
         subclasses ignore them.
         """
-        feats, p = self.prepare(posteriors, **params)
-        return self.pairwise_features(feats, p, n_jobs=n_jobs, progress=progress)
+        if isinstance(posteriors, xr.Dataset | str) or not hasattr(posteriors, "__iter__"):
+            raise ValueError(f"posteriors must be a sequence of posterior Datasets; got "
+                             f"{type(posteriors).__name__}")
+        if isinstance(n_jobs, bool) or not isinstance(n_jobs, int | np.integer) or n_jobs == 0:
+            raise ValueError(f"n_jobs must be a non-zero integer (-1 = all cores); got {n_jobs!r}")
+        check_bool("progress", progress)
+        feats, p = self.prepare(list(posteriors), **params)
+        return self.pairwise_features(feats, p, n_jobs=int(n_jobs), progress=progress)
 
     def pairwise_features(self, feats: Sequence[Any], p: dict[str, Any], *, n_jobs: int = 1,
                           progress: bool = False) -> np.ndarray:

@@ -1,28 +1,39 @@
 """Log-density targets over MRF parameter vectors.
 
-``mrfpe.targets.get(name, scene, **options)`` builds a target by name:
+``mrfpe.targets.get(name, data, **options)`` builds a target by name. What
+``data`` is depends on the target (:func:`data_kind`):
 
-* BRDF pseudolikelihoods on a :class:`mrfpe.scene.Scene` (unit-cube sampling
-  space, :mod:`mrfpe.targets.pseudolikelihood`): ``pl`` (4.23-4.24, 5.64-5.66),
-  ``pl2`` (6.54-6.59), ``pl3`` (6.60-6.62), ``pls`` (7.5-7.7), and beyond the
-  thesis ``fit`` and ``pml``;
-* the generic auto-logistic Ising/Potts model on an observed configuration
-  (:mod:`mrfpe.targets.potts`): ``potts`` (pseudolikelihood) and
-  ``potts_exact`` (exact log-likelihood by enumeration, tiny lattices).
+* ``"scene"`` -- the BRDF pseudolikelihoods on a :class:`mrfpe.scene.Scene`
+  (unit-cube sampling space, :mod:`mrfpe.targets.pseudolikelihood`): ``pl``
+  (4.23-4.24, 5.64-5.66), ``pl2`` (6.54-6.59), ``pl3`` (6.60-6.62), ``pls``
+  (7.5-7.7), and beyond the thesis ``fit`` and ``pml``;
+* ``"configurations"`` -- the generic auto-logistic Ising/Potts model on observed
+  (H, W) or (M, H, W) integer configurations (:mod:`mrfpe.targets.potts`):
+  ``potts`` (pseudolikelihood) and ``potts_exact`` (exact log-likelihood by
+  enumeration, tiny lattices).
 
+Every target declares its options (:func:`options`, :mod:`mrfpe.targets.options`);
+an unknown one is rejected with the valid ones and the nearest match.
 ``softened(target, power)`` (5.69-5.72) and ``maximise(target)`` (dense grid +
-local optimiser) work on any target.
+local optimiser) work on any target. Builds and evaluations respect a memory
+budget (:func:`memory_budget`, :func:`set_memory_budget`, ``MRFPE_MEMORY_BUDGET``).
 """
 
 from __future__ import annotations
 
+import importlib
 from typing import Any
 
 from mrfpe.targets.base import Target, as_theta_batch
+from mrfpe.targets.budget import MemoryBudgetError, memory_budget, set_memory_budget
 from mrfpe.targets.maximise import maximise
+from mrfpe.targets.options import Option, describe_options, resolve_options
 from mrfpe.targets.softening import Softened, softened
 
-__all__ = ["Softened", "Target", "as_theta_batch", "get", "maximise", "names", "softened"]
+__all__ = ["MemoryBudgetError", "Option", "Softened", "Target", "as_theta_batch", "data_kind",
+           "describe", "get", "maximise", "memory_budget", "names", "options",
+           "set_memory_budget",
+           "softened", "target_class"]
 
 # name -> (module, class); imported on first use so that `import mrfpe.targets` stays light.
 _TARGETS = {
@@ -42,16 +53,70 @@ def names() -> tuple[str, ...]:
     return tuple(_TARGETS)
 
 
-def get(name: str, scene: Any, **options: Any) -> Target:
-    """Build target ``name`` on ``scene`` (a Scene, or a configuration for ``potts*``).
+def target_class(name: str) -> type:
+    """The class registered as ``name`` (ValueError listing the names, nearest first)."""
+    import difflib
 
-    Options common to the BRDF targets: ``sigma_b`` (float or "auto"),
-    ``data_term`` ("pixel" or "triplet"), ``dtype`` ("float64"); see each class
-    for its own (e.g. ``prior_weight`` for ``pls``).
-    """
-    import importlib
-
-    if name not in _TARGETS:
-        raise ValueError(f"name must be one of {names()}; got {name!r}")
+    if not isinstance(name, str) or name not in _TARGETS:
+        close = difflib.get_close_matches(str(name), names(), n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise ValueError(f"name must be one of {', '.join(names())}; got {name!r}{hint}")
     mod, cls = _TARGETS[name]
-    return getattr(importlib.import_module(mod), cls)(scene, **options)
+    return getattr(importlib.import_module(mod), cls)
+
+
+def options(name: str) -> tuple[Option, ...]:
+    """The declared options of target ``name`` (name, type, default, check, help)."""
+    return tuple(target_class(name).option_specs)
+
+
+def data_kind(name: str) -> str:
+    """What :func:`get` takes as ``data`` for target ``name``: "scene" or "configurations"."""
+    return str(target_class(name).data_kind)
+
+
+def _check_data(name: str, kind: str, data: Any) -> None:
+    from mrfpe.scene import Scene
+
+    if kind == "scene" and not isinstance(data, Scene):
+        raise ValueError(f"data must be an mrfpe.scene.Scene for target {name!r}; got "
+                         f"{type(data).__name__}")
+    if kind == "configurations" and isinstance(data, Scene):
+        raise ValueError(f"data must be observed (H, W) or (M, H, W) integer configurations "
+                         f"for target {name!r}, not a Scene (e.g. scene.observed_labels)")
+
+
+def get(name: str, data: Any, /, **options: Any) -> Target:
+    """Build target ``name`` on ``data`` with keyword ``options``.
+
+    Parameters
+    ----------
+    name : str
+        One of :func:`names`.
+    data : Scene or array
+        A :class:`mrfpe.scene.Scene` for the BRDF targets; observed integer
+        configurations (H, W) or (M, H, W) for ``potts`` and ``potts_exact``
+        (:func:`data_kind`).
+    **options
+        The target's declared options (:func:`options`; e.g. ``sigma_b``,
+        ``data_term``, ``dtype``, ``progress`` for every BRDF target,
+        ``prior_weight`` for ``pls``, ``n_states`` and ``bounds`` for Potts).
+
+    Raises
+    ------
+    ValueError
+        For an unknown name, the wrong kind of ``data``, an unknown option
+        (listing the valid ones, nearest match first) or a bad option value --
+        all before any table is built.
+    mrfpe.targets.MemoryBudgetError
+        If the build's estimated memory exceeds :func:`memory_budget`.
+    """
+    cls = target_class(name)
+    resolve_options(name, cls.option_specs, options)  # fail fast, before the data is touched
+    _check_data(name, cls.data_kind, data)
+    return cls(data, **options)
+
+
+def describe(name: str) -> str:
+    """Plain-text listing of target ``name``'s options."""
+    return describe_options(options(name))

@@ -12,6 +12,9 @@ from typing import Any
 
 import numpy as np
 
+from mrfpe.targets.budget import check_memory, chunk_rows
+from mrfpe.validation import check_bool
+
 __all__ = ["Target", "as_theta_batch"]
 
 
@@ -26,7 +29,11 @@ def as_theta_batch(theta: Any, d: int, name: str = "theta") -> np.ndarray:
         If the trailing dimension is not ``d``, the array has more than two
         dimensions, or any entry is NaN.
     """
-    arr = np.asarray(theta, dtype=np.float64)
+    try:
+        arr = np.asarray(theta, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be an (N, {d}) or ({d},) array of numbers; got "
+                         f"{type(theta).__name__} {theta!r:.60}") from None
     if arr.ndim == 1:
         arr = arr[None, :]
     if arr.ndim != 2 or arr.shape[1] != d:
@@ -57,6 +64,10 @@ class Target:
     param_names: tuple[str, ...] = ()
     bounds: np.ndarray = np.zeros((0, 2))
     cost: float = 1.0
+    #: Declared keyword options (:class:`mrfpe.targets.options.Option`); none by default.
+    option_specs: tuple = ()
+    #: What :func:`mrfpe.targets.get` passes as the first argument ("scene", "configurations").
+    data_kind: str = "data"
 
     @property
     def ndim(self) -> int:
@@ -67,15 +78,49 @@ class Target:
         b = np.asarray(self.bounds, dtype=float)
         return np.all((theta >= b[:, 0]) & (theta <= b[:, 1]), axis=1)
 
-    def log_prob(self, theta: Any) -> np.ndarray:
-        """Log density of each row of ``theta`` (N, d) -> (N,); -inf outside bounds."""
+    def log_prob(self, theta: Any, *, progress: bool = False) -> np.ndarray:
+        """Log density of each row of ``theta`` (N, d) -> (N,); -inf outside bounds.
+
+        Parameters
+        ----------
+        theta : (N, d) or (d,) array
+            A single (d,) vector is treated as a batch of one: the result is (1,).
+        progress : bool
+            Show a tqdm progress bar over the batch's chunks.
+
+        The batch is evaluated in chunks whose working memory stays below
+        :data:`mrfpe.targets.budget.WORKING_CHUNK_BYTES`; a batch whose input,
+        output and one chunk would exceed :func:`mrfpe.targets.memory_budget`
+        raises :class:`mrfpe.targets.MemoryBudgetError` before any evaluation.
+        NaN values are returned as ``-inf``.
+        """
         theta = as_theta_batch(theta, self.ndim)
-        out = np.full(theta.shape[0], -np.inf)
-        inside = self.in_bounds(theta)
-        if inside.any():
-            vals = np.asarray(self._log_prob(theta[inside]), dtype=np.float64)
-            out[inside] = np.where(np.isnan(vals), -np.inf, vals)
+        check_bool("progress", progress)
+        n = theta.shape[0]
+        per_row = float(self._row_bytes())
+        chunks = chunk_rows(n, per_row)
+        rows = chunks[0].stop - chunks[0].start if chunks else 0
+        check_memory(n * (self.ndim + 3) * 8.0 + rows * per_row,
+                     f"{type(self).__name__}.log_prob on {n} parameter vectors",
+                     "evaluate fewer at a time")
+        out = np.full(n, -np.inf)
+        idx = np.flatnonzero(self.in_bounds(theta))
+        if idx.size:
+            from tqdm.auto import tqdm
+
+            with tqdm(total=int(idx.size), disable=not progress, unit="theta",
+                      desc=f"{getattr(self, 'name', '') or type(self).__name__} log_prob",
+                      leave=False) as bar:
+                for sl in chunk_rows(int(idx.size), per_row):
+                    rows_ix = idx[sl]
+                    vals = np.asarray(self._log_prob(theta[rows_ix]), dtype=np.float64)
+                    out[rows_ix] = np.where(np.isnan(vals), -np.inf, vals)
+                    bar.update(rows_ix.size)
         return out
+
+    def _row_bytes(self) -> float:
+        """Working memory of ``_log_prob`` per parameter vector (bytes; 0: never chunk)."""
+        return 0.0
 
     def _log_prob(self, theta: np.ndarray) -> np.ndarray:  # pragma: no cover - abstract
         raise NotImplementedError

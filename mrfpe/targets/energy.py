@@ -155,7 +155,7 @@ def _separable_geometry(model, tri_pts: np.ndarray, scene) -> np.ndarray:
     return out
 
 
-def build_tables(scene, data_term: str = "pixel") -> DataTables:
+def build_tables(scene, data_term: str = "pixel", *, progress: bool = False) -> DataTables:
     """Data-energy tables of every node of ``scene`` for ``scene.brdf``.
 
     Parameters
@@ -163,6 +163,8 @@ def build_tables(scene, data_term: str = "pixel") -> DataTables:
     scene : mrfpe.scene.Scene
     data_term : "pixel" | "triplet"
         See the module docstring.
+    progress : bool
+        Show a tqdm bar over the variable triangles' geometry batches.
     """
     if data_term not in DATA_TERMS:
         raise ValueError(f"data_term must be one of {DATA_TERMS}; got {data_term!r}")
@@ -227,7 +229,10 @@ def build_tables(scene, data_term: str = "pixel") -> DataTables:
     # Entry of (variable triangle v, label s): var_ptr[node] + t * B + s.
     dest = var_ptr[var_node][:, None] + t_in_node[:, None] * B + labels[None, :]  # (n_var, B)
     step = max(1, _GEOM_BATCH // B)
-    for a in range(0, n_var, step):
+    from tqdm.auto import tqdm
+
+    for a in tqdm(range(0, n_var, step), disable=not progress, leave=False,
+                  desc="data tables", unit="batch"):
         sl = slice(a, a + step)
         pts = np.repeat(Q[var_nodes[sl]][:, None], B, axis=1)  # (m, B, 3, 3)
         m = pts.shape[0]

@@ -28,6 +28,9 @@ from typing import Any
 
 import numpy as np
 
+from mrfpe.targets.budget import check_memory
+from mrfpe.validation import check_seed
+
 __all__ = ["METHODS", "grid_points", "maximise"]
 
 METHODS = ("pattern", "nelder-mead", "l-bfgs-b")
@@ -159,6 +162,7 @@ def maximise(target: Any, grid: int | Any = 20, *, seed: int | None = 0, n_start
     lo, hi = b[:, 0], b[:, 1]
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}; got {method!r}")
+    seed = check_seed(seed)
     for name, val, low in (("n_starts", n_starts, 1), ("n_random", n_random, 0),
                            ("max_iter", max_iter, 1), ("batch", batch, 1)):
         if isinstance(val, bool) or not isinstance(val, int | np.integer) or val < low:
@@ -168,10 +172,16 @@ def maximise(target: Any, grid: int | Any = 20, *, seed: int | None = 0, n_start
     if isinstance(grid, int | np.integer) and not isinstance(grid, bool):
         if grid < 2:
             raise ValueError(f"grid must be >= 2 points per dimension; got {grid}")
+        check_memory(8.0 * (d + 2) * float(grid) ** d,
+                     f"a grid of {int(grid)}^{d} points", "use a coarser grid")
         pts = grid_points(b, int(grid))
         spacing = 1.0 / (int(grid) - 1)
     else:
-        pts = np.asarray(grid, dtype=np.float64)
+        try:
+            pts = np.asarray(grid, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"grid must be an integer >= 2 or an (M, {d}) array of points; "
+                             f"got {grid!r}") from None
         if pts.ndim != 2 or pts.shape[1] != d or pts.shape[0] < 1 or not np.all(np.isfinite(pts)):
             raise ValueError(f"grid must be an int or a finite (M, {d}) array; got shape "
                              f"{pts.shape}")

@@ -35,11 +35,14 @@ A student can draw data at known parameters, then compare the PL maximiser
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
+from mrfpe.lattice import split_ids
 from mrfpe.targets.base import Target, as_theta_batch
+from mrfpe.targets.options import Option, optional
+from mrfpe.validation import check_seed
 
 __all__ = [
     "PottsExactLikelihood",
@@ -100,6 +103,29 @@ def _bounds(bounds: Any, q: int) -> np.ndarray:
     return b
 
 
+def _check_n_states(name: str, value: Any) -> int:
+    return _check_states(value)
+
+
+def _check_bounds_value(name: str, value: Any) -> np.ndarray:
+    try:
+        b = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a finite (q, 2) array; got {value!r}") from None
+    if b.ndim != 2 or b.shape[1] != 2:
+        raise ValueError(f"{name} must be a finite (q, 2) array; got shape {b.shape}")
+    return b
+
+
+#: Options of the Potts targets (the shape of ``bounds`` is checked against ``q`` later).
+POTTS_OPTIONS: tuple[Option, ...] = (
+    Option("n_states", "int >= 2 | None", None, optional(_check_n_states),
+           "q; inferred as max(state) + 1 (at least 2) if None"),
+    Option("bounds", "(q, 2) array | None", None, optional(_check_bounds_value),
+           "sampling-space bounds of (coupling, fields); default [-2, 2] and [-3, 3]"),
+)
+
+
 def neighbour_counts(x: np.ndarray, n_states: int) -> np.ndarray:
     """``n_i(a)``: first-order neighbours of each site in each state, (M, H, W, q)."""
     x = np.asarray(x)
@@ -145,6 +171,10 @@ class PottsPseudoLikelihood(Target):
     """
 
     name = "potts"
+    #: The options this target accepts (:mod:`mrfpe.targets.options`).
+    option_specs: ClassVar[tuple[Option, ...]] = POTTS_OPTIONS
+    #: What :func:`mrfpe.targets.get` passes as the first argument.
+    data_kind: ClassVar[str] = "configurations"
 
     def __init__(self, configurations: Any, n_states: int | None = None,
                  bounds: Any = None) -> None:
@@ -172,6 +202,9 @@ class PottsPseudoLikelihood(Target):
         else:
             self._rows, self._weight = np.zeros((0, q + 1), dtype=np.int64), np.zeros(0, int)
 
+    def _row_bytes(self) -> float:
+        return 8.0 * 4 * self._rows.shape[0] * self.n_states
+
     def _log_prob(self, theta: np.ndarray) -> np.ndarray:
         if self._rows.shape[0] == 0:
             return np.zeros(theta.shape[0])
@@ -186,15 +219,7 @@ class PottsPseudoLikelihood(Target):
 
     def partition(self, k: int, kind: str = "strided") -> list[PottsPseudoLikelihood]:
         """Sub-lattice PLs over disjoint site subsets (5.67, 5.68) that sum to this one."""
-        n = self.sites.shape[0]
-        if isinstance(k, bool) or not isinstance(k, int | np.integer) or not 1 <= k <= n:
-            raise ValueError(f"k must be an integer in [1, {n}]; got {k!r}")
-        if kind == "strided":
-            groups = [self.sites[j::int(k)] for j in range(int(k))]
-        elif kind == "block":
-            groups = np.array_split(self.sites, int(k))
-        else:
-            raise ValueError(f"kind must be 'strided' or 'block'; got {kind!r}")
+        groups = split_ids(self.sites, k, kind, what="n_sites")
         parts = []
         for g in groups:
             part = object.__new__(type(self))
@@ -220,6 +245,8 @@ class PottsExactLikelihood(Target):
     """
 
     name = "potts_exact"
+    option_specs: ClassVar[tuple[Option, ...]] = POTTS_OPTIONS
+    data_kind: ClassVar[str] = "configurations"
 
     def __init__(self, configurations: Any, n_states: int | None = None,
                  bounds: Any = None) -> None:
@@ -250,6 +277,9 @@ class PottsExactLikelihood(Target):
         theta = as_theta_batch(theta, self.ndim)
         e = theta @ self._stats.T + np.log(self._mult)[None, :]
         return _logsumexp(e, axis=1)
+
+    def _row_bytes(self) -> float:
+        return 8.0 * 3 * self._stats.shape[0]
 
     def _log_prob(self, theta: np.ndarray) -> np.ndarray:
         return theta @ self._stats_obs - self._n_obs * self.log_partition(theta)
@@ -304,7 +334,7 @@ def gibbs_sample(theta: Any, shape: tuple[int, int], n_states: int = 2, *, n_sam
                            ("thin", thin, 1)):
         if isinstance(val, bool) or not isinstance(val, int | np.integer) or val < low:
             raise ValueError(f"{name} must be an integer >= {low}; got {val!r}")
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(check_seed(seed))
     if isinstance(init, str):
         if init != "random":
             raise ValueError(f"init must be 'random' or an (H, W) configuration; got {init!r}")

@@ -78,12 +78,23 @@ def features(model: Any, feats: np.ndarray, weight: np.ndarray) -> np.ndarray:
 
 
 def coefficients(model: Any, theta: np.ndarray) -> np.ndarray:
-    """Per-particle coefficients (N, 5) from natural-unit parameters (N, d)."""
+    """Per-particle coefficients (N, 5) from natural-unit parameters (N, d).
+
+    A Ward roughness so small that ``alpha**2`` underflows (``alpha < ~1e-154``)
+    gives non-finite coefficients silently (no RuntimeWarning); the targets map
+    such rows to ``-inf`` (:meth:`mrfpe.targets.brdf_target.BRDFTarget._terms`).
+    """
     model = _brdf.get(model)
     th = np.asarray(theta, dtype=np.float64)
     n = th.shape[0]
     out = np.zeros((n, 5))
     name = model.name
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        _fill(out, name, th)
+    return out
+
+
+def _fill(out: np.ndarray, name: str, th: np.ndarray) -> None:
     if name == "lambertian":
         out[:, 0] = th[:, 0] / _PI
     elif name == "ward":
@@ -118,7 +129,6 @@ def coefficients(model: Any, theta: np.ndarray) -> np.ndarray:
         out[:, 4] = nv
     else:  # pragma: no cover
         raise ValueError(f"no separable form for BRDF {name!r}")
-    return out
 
 
 def radiance(coef: np.ndarray, feat: np.ndarray) -> np.ndarray:

@@ -40,9 +40,10 @@ class Softened(Target):
         self.bounds = np.asarray(target.bounds, dtype=np.float64)
         self.cost = float(getattr(target, "cost", 1.0))
 
-    def log_prob(self, theta: Any) -> np.ndarray:
+    def log_prob(self, theta: Any, *, progress: bool = False) -> np.ndarray:
         theta = as_theta_batch(theta, self.ndim)
-        lp = np.asarray(self.target.log_prob(theta), dtype=np.float64)
+        lp = np.asarray(self.target.log_prob(theta, progress=progress) if progress
+                        else self.target.log_prob(theta), dtype=np.float64)
         out = self.power * lp
         return np.where(np.isnan(out), -np.inf, out)
 

@@ -37,3 +37,9 @@ __all__ = [
     "check_reproducible", "check_sampler", "check_schema", "check_two_modes",
     "moment_tolerances", "run_check",
 ]
+
+# Target and distance conformance checks (mrfpe.testing.target_checks, .distance_checks).
+from mrfpe.testing.distance_checks import DISTANCE_CHECKS, check_distance
+from mrfpe.testing.target_checks import TARGET_CHECKS, check_target
+
+__all__ += ["DISTANCE_CHECKS", "TARGET_CHECKS", "check_distance", "check_target"]

@@ -134,3 +134,29 @@ def test_bad_parameters_raise(params):
     a = random_post(rng)
     with pytest.raises(ValueError, match=next(iter(params))):
         mrfpe.distance("agmmp", a, a, **params)
+
+
+def _cdist_route(x, y, log_wy, sigma):
+    """Independent route: scipy cdist squared distances + scipy logsumexp (the old body)."""
+    from scipy.spatial.distance import cdist
+    from scipy.special import logsumexp
+
+    keep = np.isfinite(log_wy)
+    a = -0.5 * cdist(x, y[keep], "sqeuclidean") / sigma + log_wy[keep][None, :]
+    return logsumexp(a, axis=1) - 0.5 * x.shape[1] * np.log(2.0 * np.pi * sigma)
+
+
+@pytest.mark.parametrize("sigma", [0.5, 5e-3, 1e-4, 1e-8])
+@pytest.mark.parametrize("d", [1, 3])
+def test_shared_mixture_matches_cdist_route(sigma, d):
+    from mrfpe.distances.agmmp import log_mixture_density
+
+    rng = np.random.default_rng(5)
+    x = rng.random((120, d))
+    y = np.vstack([rng.random((60, d)), x[:40] + 1e-9 * rng.standard_normal((40, d))])
+    lw = rng.standard_normal(100)
+    lw[::7] = -np.inf  # zero-weight components
+    lw -= np.logaddexp.reduce(lw[np.isfinite(lw)])
+    got = log_mixture_density(x, y, lw, sigma)
+    want = _cdist_route(x, y, lw, sigma)
+    np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-10)

@@ -55,3 +55,14 @@ def test_noise_free_ward_maximiser_near_truth():
     theta, lp = maximise(t, grid=20)
     assert np.linalg.norm(theta - u) < 0.1
     assert lp >= t.log_prob(u)[0] - 1e-9
+
+
+def test_bad_arguments_are_named():
+    from mrfpe.testing import TwoModes
+
+    with pytest.raises(ValueError, match="grid must be"):
+        maximise(TwoModes(), grid="x")
+    with pytest.raises(ValueError, match="seed must be"):
+        maximise(TwoModes(), seed="x")
+    with pytest.raises(ValueError, match="theta must be"):
+        TwoModes().log_prob("abc")

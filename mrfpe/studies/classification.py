@@ -38,9 +38,9 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from mrfpe.studies._report import markdown_table, new_figure, save_figure, write_report
-from mrfpe.studies._synthetic import child_seeds
 from mrfpe.studies._thesis import AGMMP_SIGMAS, CLASSIFICATION
+from mrfpe.studies.report import markdown_table, new_figure, save_figure, write_report
+from mrfpe.studies.synthetic import child_seeds
 from mrfpe.study import Study
 
 MATERIAL_NAMES = ["shiny fabric", "shiny plastic", "laminated paper", "glossy brown paper",

@@ -28,8 +28,8 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from mrfpe.studies._report import blank_figure, markdown_table, save_figure, write_report
-from mrfpe.studies._synthetic import DEFAULT_SURFACES, child_seeds, distance
+from mrfpe.studies.report import blank_figure, markdown_table, save_figure, write_report
+from mrfpe.studies.synthetic import DEFAULT_SURFACES, child_seeds, distance
 from mrfpe.study import Study
 
 CASES = [["ward", [0.7, 0.4, 0.9]], ["ward", [0.8, 0.9, 0.5]], ["phong", [0.8, 0.9, 0.5]]]

@@ -32,8 +32,9 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from mrfpe.studies._report import markdown_table, new_figure, save_figure, write_report
-from mrfpe.studies._synthetic import (
+from mrfpe.studies._thesis import RUNTIME_MINUTES
+from mrfpe.studies.report import markdown_table, new_figure, save_figure, write_report
+from mrfpe.studies.synthetic import (
     child_seeds,
     distance,
     first_reach,
@@ -41,7 +42,6 @@ from mrfpe.studies._synthetic import (
     maximiser,
     sample_traced,
 )
-from mrfpe.studies._thesis import RUNTIME_MINUTES
 from mrfpe.study import Study, by_cell
 
 #: Which run is compared with which column of Table 8.12.

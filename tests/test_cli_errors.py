@@ -35,13 +35,17 @@ def run(argv, capsys):
 
 @pytest.fixture
 def no_sampling(monkeypatch):
-    """Fail the test if any sampler starts: the errors must come first."""
+    """Fail the test if a sampler or a study trial starts: the errors must come first."""
     from mrfpe.samplers.base import Sampler
+    from mrfpe.samplers.pmc import PMC
+    from mrfpe.study import runner
 
     def refuse(*a, **k):
-        raise AssertionError("sampling started before the inputs were checked")
+        raise AssertionError("work started before the inputs were checked")
 
-    monkeypatch.setattr(Sampler, "run", refuse)
+    for cls in (Sampler, PMC):
+        monkeypatch.setattr(cls, "run", refuse)
+    monkeypatch.setattr(runner, "execute", refuse)
 
 
 @pytest.mark.parametrize(("argv", "message"), [

@@ -19,6 +19,11 @@ The runner (:func:`run`, ``mrfpe study run``)
   moment it finishes, atomically (temporary file + ``os.replace``), with the
   trial's config, its hash, seed, timing and the package versions in the
   attributes;
+- checks every setting against the study's declared :class:`Setting` s (type,
+  choices, check) and the output directory and scheduler before any trial;
+- holds an exclusive lock on the output directory, removes temporary files a
+  killed run left, recomputes (and reports) unreadable trial files, and saves
+  a failed trial's traceback as ``trials/<stem>.error.txt``;
 - skips trials whose file exists with the same config hash, so rerunning a
   command resumes it (a kill loses at most the trials in flight); a file with
   a *different* hash is never silently reused: the run stops and says which

@@ -34,7 +34,7 @@ def connect(address: str, timeout: float = CONNECT_TIMEOUT_S) -> Any:
     if not isinstance(address, str) or not address.strip():
         raise ValueError(f"--scheduler expects an address like tcp://HOST:8786; got {address!r}")
     try:
-        return Client(address, timeout=timeout, set_as_default=False)
+        return Client(address, timeout=timeout)
     except (OSError, TimeoutError, ValueError) as exc:
         reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         if len(reason) > 160:

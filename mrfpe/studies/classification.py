@@ -43,6 +43,7 @@ from mrfpe.studies.report import markdown_table, new_figure, save_figure, write_
 from mrfpe.studies.synthetic import (
     SURFACES,
     check_sampler_options,
+    check_target_options,
     child_seeds,
     non_negative,
     positive,
@@ -263,6 +264,7 @@ STUDY = Study(
         Setting("extra_distances", ["matusita", "sliced_wasserstein"],
                 "further registered distances to tabulate", choices=_distance_names),
     ],
+    check=check_target_options,
     quick={"brdf": ["ward"], "material": [0, 1, 4], "specimen": [0, 1], "shape": [12, 12],
            "n_labels": 10, "pmc": {"n_samples": 64, "n_iterations": 5, "variant": "thesis2"},
            "grid_samples": 64, "lm": {"n_seeds": 8, "max_nfev": 40}},

@@ -31,8 +31,8 @@ from mrfpe.studies.report import markdown_table, new_figure, save_figure, write_
 from mrfpe.studies.synthetic import (
     DEFAULTS,
     QUICK,
+    check_problem,
     check_sampler_options,
-    check_surfaces,
     child_seeds,
     distance,
     positive,
@@ -137,7 +137,7 @@ def figures(results: list[xr.Dataset], config: dict, out_dir: Path) -> list[str]
 
 def check_config(config: dict) -> None:
     """Every sampler accepts ``n_steps`` and ``sampler_options``."""
-    check_surfaces(config)
+    check_problem(config)
     for name in config["samplers"]:
         check_sampler_options(name, {"n_steps": config["n_steps"], **config["sampler_options"]})
 

@@ -34,8 +34,8 @@ from mrfpe.studies.report import markdown_table, new_figure, save_figure, write_
 from mrfpe.studies.synthetic import (
     DEFAULTS,
     QUICK,
+    check_problem,
     check_sampler_options,
-    check_surfaces,
     child_seeds,
     distance,
     positive,
@@ -180,7 +180,7 @@ STUDY = Study(
                 check=lambda opts: check_sampler_options("lm_multiseed", opts)),
     ],
     quick={**QUICK, "n_seeds": 27},
-    check=check_surfaces,
+    check=check_problem,
     trial=trial,
     summarise=summarise,
     grid=("brdf", "n_labels"),

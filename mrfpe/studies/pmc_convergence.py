@@ -55,8 +55,8 @@ from mrfpe.studies.report import markdown_table, new_figure, save_figure, write_
 from mrfpe.studies.synthetic import (
     DEFAULTS,
     QUICK,
+    check_problem,
     check_sampler_options,
-    check_surfaces,
     child_seeds,
     distance,
     positive,
@@ -192,7 +192,7 @@ def _main_variant(variants: list[str]) -> str:
 
 def check_config(config: dict) -> None:
     """Every PMC run of a trial can be built: variant × particle count × ``pmc_options``."""
-    check_surfaces(config)
+    check_problem(config)
     for variant in config["variants"]:
         for n in config["n_samples"]:
             check_sampler_options("pmc", {"n_samples": n, "n_iterations": config["n_iterations"],

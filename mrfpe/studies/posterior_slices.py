@@ -31,6 +31,7 @@ import xarray as xr
 from mrfpe.studies.report import blank_figure, markdown_table, save_figure, write_report
 from mrfpe.studies.synthetic import (
     check_sampler_options,
+    check_target_options,
     child_seeds,
     distance,
     positive,
@@ -161,6 +162,7 @@ STUDY = Study(
         Setting("log_floor", 200.0, "slices are clipped this many log units below the maximum",
                 check=positive),
     ],
+    check=check_target_options,
     quick={"case": [0, 2], "shape": [12, 12], "n_labels": 10,
            "pmc": {"n_samples": 64, "n_iterations": 5, "variant": "thesis2"},
            "iterations": [1, 3, 5], "volume_grid": 10},

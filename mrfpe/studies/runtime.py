@@ -37,6 +37,7 @@ from mrfpe.studies.report import markdown_table, new_figure, save_figure, write_
 from mrfpe.studies.synthetic import (
     SURFACES,
     check_runs,
+    check_target_options,
     child_seeds,
     distance,
     first_reach,
@@ -185,6 +186,7 @@ STUDY = Study(
         Setting("runs", RUNS, "sampler runs per scene, {label: {\"sampler\": NAME, option: "
                 "value}}", check=check_runs),
     ],
+    check=check_target_options,
     quick={
         "n_trials": 1, "n_labels": [10, 20], "shape": [12, 12], "maximiser_grid": 8,
         "runs": {

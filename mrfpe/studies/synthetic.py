@@ -167,6 +167,44 @@ def check_surfaces(config: Mapping[str, Any]) -> None:
                          f"add it, e.g. --set 'surfaces={{\"{missing[0]}\": \"smooth\"}}'")
 
 
+def check_target_options(config: Mapping[str, Any]) -> None:
+    """Study ``check``: the targets accept their ``target_options``.
+
+    Builds each target with its options on a 4×4 scene with 2 labels (well
+    under a second): the options are only checked against a scene, and a
+    misspelt option must not wait for a trial's expensive setup to fail.
+    """
+    if "target" in config:
+        by_target = {config["target"]: config["target_options"]}
+    else:  # {target: options}, as in target_bias
+        by_target = dict(config["target_options"])
+    by_target = {k: v for k, v in by_target.items() if v}
+    if not by_target:
+        return
+    import mrfpe
+
+    brdf = config.get("brdf", "ward")
+    brdf = brdf[0] if isinstance(brdf, list) else brdf
+    model = mrfpe.brdf.get(brdf)
+    scene = mrfpe.synthetic.make_scene(brdf=brdf, theta=model.to_natural(np.full(model.d, 0.5)),
+                                       shape=(4, 4), n_labels=2, seed=0)
+    for name, options in by_target.items():
+        if not isinstance(options, dict):
+            raise ValueError(f"setting 'target_options': options of {name!r} must be an "
+                             f"object; got {options!r}")
+        try:
+            mrfpe.targets.get(name, scene, **options)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"setting 'target_options': {exc}") from None
+
+
+def check_problem(config: Mapping[str, Any]) -> None:
+    """Study ``check``: :func:`check_surfaces` and :func:`check_target_options`."""
+    if "surfaces" in config:
+        check_surfaces(config)
+    check_target_options(config)
+
+
 def settings(*names: str, **defaults: Any) -> list[Setting]:
     """The shared :data:`SETTINGS` called ``names``, with some defaults replaced.
 

@@ -32,6 +32,7 @@ from mrfpe.studies.report import markdown_table, new_figure, save_figure, write_
 from mrfpe.studies.synthetic import (
     SURFACES,
     check_runs,
+    check_target_options,
     child_seeds,
     distance,
     maximiser,
@@ -192,6 +193,7 @@ STUDY = Study(
                 "sampler runs per target, {label: {\"sampler\": NAME, option: value}}",
                 check=check_runs),
     ],
+    check=check_target_options,
     quick={"n_trials": 1, "brdf": ["ward"], "sigma_b_scale": [1.0, 4.0], "shape": [12, 12],
            "n_labels": 10, "maximiser_grid": 8,
            "runs": {"pmc": {"sampler": "pmc", "n_samples": 64, "n_iterations": 5}}},

@@ -122,3 +122,13 @@ def test_settings_and_config_must_agree():
     assert st_.config == {"a": 1, "n_trials": 1, "seed": 0}
     with pytest.raises(ValueError, match="disagrees"):
         S.Study(**kw, settings=[S.Setting("a", 1)], config={"n_trials": 1, "seed": 0, "a": 2})
+
+
+def test_the_library_does_not_import_the_command_line():
+    import subprocess
+    import sys
+
+    code = ("import sys; from mrfpe import study as S; import mrfpe.studies.pmc_convergence as m; "
+            "S.resolve_config(m.STUDY, overrides=['n_labels=20']); "
+            "assert 'mrfpe.cli' not in sys.modules, 'mrfpe.study imported mrfpe.cli'")
+    subprocess.run([sys.executable, "-c", code], check=True)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import difflib
 import inspect
+import os
 import sys
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -109,7 +110,7 @@ def _distances(args: argparse.Namespace) -> int:
 
 def _estimate(args: argparse.Namespace) -> int:
     import mrfpe
-    from mrfpe.netcdf import check_readable, check_writable
+    from mrfpe.netcdf import check_readable, check_writable, tmp_path_for
     from mrfpe.posterior import save
     from mrfpe.samplers import get as get_sampler
 
@@ -131,7 +132,13 @@ def _estimate(args: argparse.Namespace) -> int:
     except TypeError as exc:
         raise ValueError(f"--target-option: {exc}") from None
     post = sampler.run(target, seed=args.seed, progress=not args.quiet)
-    save(post, out)
+    tmp = tmp_path_for(out)  # a kill mid-write must not leave a partial posterior
+    try:
+        save(post, tmp)
+        os.replace(tmp, out)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
     m = post["map_theta"].isel(step=-1).values
     print(f"MAP (sampling space): {m.round(4).tolist()}  -> {out}")
     return 0
@@ -248,6 +255,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise
         print(f"mrfpe {args.command}: error: {exc}", file=sys.stderr)
         return USAGE_ERROR
+    except KeyboardInterrupt:
+        if args.debug:
+            raise
+        print(f"mrfpe {args.command}: interrupted", file=sys.stderr)
+        return 130
     except Exception as exc:  # a bug or an environment failure, not bad input
         if args.debug:
             raise

@@ -1,26 +1,91 @@
-"""The ``mrfpe`` command line: demo, samplers, distances, estimate, compare, study."""
+"""The ``mrfpe`` command line: demo, samplers, distances, estimate, compare, study.
+
+Every command checks all of its inputs (files readable and of the right kind,
+output paths writable, settings known and well-typed) before its first
+expensive step. Usage and input errors print one line, ``mrfpe CMD: error:
+...``, and exit with status 2; ``--debug`` shows the traceback instead.
+"""
 
 from __future__ import annotations
 
 import argparse
-import json
+import difflib
+import inspect
+import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
+__all__ = ["build_parser", "main", "parse_assignments"]
 
-def parse_assignments(items: Sequence[str]) -> dict[str, Any]:
-    """Parse ``key=value`` strings; values are read as JSON where possible."""
-    out: dict[str, Any] = {}
-    for item in items:
-        if "=" not in item:
-            raise SystemExit(f"expected key=value, got {item!r}")
-        key, raw = item.split("=", 1)
-        try:
-            out[key.strip()] = json.loads(raw)
-        except json.JSONDecodeError:
-            out[key.strip()] = raw
-    return out
+#: Exit status for usage and input errors (argparse's own convention).
+USAGE_ERROR = 2
+
+
+def parse_assignments(items: Sequence[str], option: str = "--set") -> dict[str, Any]:
+    """Parse ``key=value`` strings (values read as JSON where possible) for ``option``.
+
+    Raises ``ValueError`` naming ``option`` for an item without ``=``; :func:`main`
+    reports it and exits 2.
+    """
+    from mrfpe.study.config import parse_assignments as parse
+
+    try:
+        return parse(items)
+    except ValueError as exc:
+        raise ValueError(f"{option}: {exc}") from None
+
+
+def _keyword_names(fn: Callable[..., Any], skip: int) -> list[str] | None:
+    """Keyword parameters of ``fn`` after the first ``skip``; ``None`` if it takes ``**kw``."""
+    params = list(inspect.signature(fn).parameters.values())[skip:]
+    if any(p.kind is p.VAR_KEYWORD for p in params):
+        return None
+    return [p.name for p in params if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)]
+
+
+def _check_keywords(given: dict[str, Any], valid: list[str] | None, option: str,
+                    what: str) -> None:
+    if valid is None:
+        return
+    for key in given:
+        if key not in valid:
+            near = difflib.get_close_matches(key, valid, n=1)
+            hint = f" (did you mean {near[0]!r}?)" if near else ""
+            raise ValueError(f"{option}: {what} has no parameter {key!r}{hint}; parameters: "
+                             f"{', '.join(valid) or '(none)'}")
+
+
+def _load_scene(path: str) -> Any:
+    from mrfpe.netcdf import open_dataset
+    from mrfpe.scene import Scene
+
+    ds = open_dataset(path, "scene")
+    try:
+        return Scene.from_dataset(ds)
+    except (KeyError, ValueError, TypeError, AttributeError) as exc:
+        raise ValueError(f"{path}: not a scene file (written by Scene.save / mrfpe demo): "
+                         f"{type(exc).__name__}: {exc}") from None
+
+
+def _load_posterior(path: str) -> Any:
+    from mrfpe import posterior as P
+    from mrfpe.netcdf import check_readable
+
+    check_readable(path, "posterior")
+    try:
+        post = P.load(path)
+    except (OSError, RuntimeError) as exc:  # until posterior.load names the file itself
+        from mrfpe.netcdf import open_dataset
+
+        open_dataset(path, "posterior")  # raises the one-line error
+        raise ValueError(f"{path}: not a readable netCDF posterior file ({exc})") from None
+    try:
+        P.validate(post)
+    except ValueError as exc:
+        raise ValueError(f"{path}: not a posterior file (written by mrfpe estimate / "
+                         f"posterior.save): {exc}") from None
+    return post
 
 
 def _demo(args: argparse.Namespace) -> int:
@@ -45,43 +110,83 @@ def _distances(args: argparse.Namespace) -> int:
 
 def _estimate(args: argparse.Namespace) -> int:
     import mrfpe
-    from mrfpe.scene import Scene
-
-    scene = Scene.load(args.scene)
-    target = mrfpe.targets.get(args.target, scene, **parse_assignments(args.target_option))
-    post = mrfpe.sample(args.sampler, target, seed=args.seed, progress=not args.quiet,
-                        **parse_assignments(args.set))
+    from mrfpe.netcdf import check_readable, check_writable, tmp_path_for
     from mrfpe.posterior import save
+    from mrfpe.samplers import get as get_sampler
 
-    save(post, args.out)
+    # Everything cheap first: settings, paths, the scene; sampling last.
+    settings = parse_assignments(args.set, "--set")
+    target_options = parse_assignments(args.target_option, "--target-option")
+    if args.target not in mrfpe.targets.names():
+        raise ValueError(f"--target: unknown target {args.target!r}; available: "
+                         f"{', '.join(mrfpe.targets.names())}")
+    cls = get_sampler(args.sampler)
+    _check_keywords(settings, _keyword_names(cls.__init__, 1), "--set",
+                    f"sampler {args.sampler!r}")
+    sampler = cls(**settings)
+    check_readable(args.scene, "scene")
+    out = check_writable(args.out, "--out posterior")
+    scene = _load_scene(args.scene)
+    try:
+        target = mrfpe.targets.get(args.target, scene, **target_options)
+    except TypeError as exc:
+        raise ValueError(f"--target-option: {exc}") from None
+    post = sampler.run(target, seed=args.seed, progress=not args.quiet)
+    tmp = tmp_path_for(out)  # a kill mid-write must not leave a partial posterior
+    try:
+        save(post, tmp)
+        os.replace(tmp, out)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
     m = post["map_theta"].isel(step=-1).values
-    print(f"MAP (sampling space): {m.round(4).tolist()}  -> {args.out}")
+    print(f"MAP (sampling space): {m.round(4).tolist()}  -> {out}")
     return 0
 
 
 def _compare(args: argparse.Namespace) -> int:
-    import mrfpe
-    from mrfpe.posterior import load
+    from mrfpe.distances import get as get_distance
 
-    a, b = load(args.a), load(args.b)
-    print(mrfpe.distance(args.distance, a, b, **parse_assignments(args.param)))
+    params = parse_assignments(args.param, "--param")
+    cls = get_distance(args.distance)
+    _check_keywords(params, _keyword_names(cls.__call__, 3), "--param",
+                    f"distance {args.distance!r}")
+    a, b = _load_posterior(args.a), _load_posterior(args.b)
+    print(float(cls()(a, b, **params)))
     return 0
 
 
 def _study(args: argparse.Namespace) -> int:
-    from mrfpe import study
+    from mrfpe.study import cli as study_cli
 
-    return study.cli(args)
+    return study_cli(args)
+
+
+def _version() -> str:
+    from mrfpe import __version__
+
+    return f"mrfpe {__version__}"
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="mrfpe", description=__doc__)
+    """The argument parser of ``mrfpe`` (every option with its help text)."""
+    p = argparse.ArgumentParser(prog="mrfpe", description=__doc__.split("\n\n")[0])
+    p.add_argument("--version", action="version", version=_version())
+    p.add_argument("--debug", action="store_true",
+                   help="show the full traceback of an error instead of one line")
     sub = p.add_subparsers(dest="command", required=True)
 
-    d = sub.add_parser("demo", help="synthetic Ward scene -> PMC posterior -> report and figures")
-    d.add_argument("--out", default="mrfpe-demo", help="output directory (default: mrfpe-demo)")
-    d.add_argument("--quick", action="store_true", help="smaller scene and fewer samples")
-    d.add_argument("--seed", type=int, default=0)
+    d = sub.add_parser("demo", help="synthetic Ward scene -> PMC posterior -> report and figures",
+                       description="Render a synthetic Ward scene with known parameters, "
+                       "sample its pseudolikelihood with PMC, and write scene.nc, "
+                       "posterior.nc, report.md and particles.png into --out.")
+    d.add_argument("--out", default="mrfpe-demo",
+                   help="output directory, created if needed (default: mrfpe-demo)")
+    d.add_argument("--quick", action="store_true",
+                   help="40x40 scene, 10 labels, 300 particles x 8 iterations (seconds, "
+                        "not minutes)")
+    d.add_argument("--seed", type=int, default=0,
+                   help="seed of the scene, the true parameters and the sampler (default: 0)")
     d.set_defaults(func=_demo)
 
     s = sub.add_parser("samplers", help="list registered samplers")
@@ -90,45 +195,77 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=_distances)
 
     e = sub.add_parser("estimate", help="sample a target built from a scene netCDF file")
-    e.add_argument("scene")
-    e.add_argument("--sampler", default="pmc")
-    e.add_argument("--target", default="pls")
-    e.add_argument("--out", required=True)
-    e.add_argument("--seed", type=int, default=0)
+    e.add_argument("scene", help="scene netCDF file (Scene.save, or scene.nc of mrfpe demo)")
+    e.add_argument("--sampler", default="pmc",
+                   help="sampler name, see 'mrfpe samplers' (default: pmc)")
+    e.add_argument("--target", default="pls",
+                   help="target built on the scene: pls, fit or pml (default: pls)")
+    e.add_argument("--out", required=True,
+                   help="posterior netCDF file to write (its directory must exist)")
+    e.add_argument("--seed", type=int, default=0, help="sampler seed (default: 0)")
     e.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="sampler setting (repeatable)")
-    e.add_argument("--target-option", action="append", default=[], metavar="KEY=VALUE")
-    e.add_argument("--quiet", action="store_true")
+                   help="sampler setting, value as JSON where it parses (repeatable), "
+                        "e.g. --set n_samples=1000")
+    e.add_argument("--target-option", action="append", default=[], metavar="KEY=VALUE",
+                   help="target option (repeatable), e.g. --target-option dtype=float32")
+    e.add_argument("--quiet", action="store_true", help="no progress bar")
     e.set_defaults(func=_estimate)
 
     c = sub.add_parser("compare", help="distance between two posterior netCDF files")
-    c.add_argument("a")
-    c.add_argument("b")
-    c.add_argument("--distance", default="bhattacharyya")
-    c.add_argument("--param", action="append", default=[], metavar="KEY=VALUE")
+    c.add_argument("a", help="first posterior netCDF file (mrfpe estimate --out)")
+    c.add_argument("b", help="second posterior netCDF file")
+    c.add_argument("--distance", default="bhattacharyya",
+                   help="distance name, see 'mrfpe distances' (default: bhattacharyya)")
+    c.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
+                   help="distance parameter (repeatable), e.g. --param alpha=0.7")
     c.set_defaults(func=_compare)
 
     st = sub.add_parser("study", help="reproducible studies of the thesis's experiments")
     st_sub = st.add_subparsers(dest="study_command", required=True)
-    st_sub.add_parser("list", help="list studies")
+    st_sub.add_parser("list", help="list studies with their trial counts and full-run times")
+    sh = st_sub.add_parser("show", help="a study's settings: type, default, --quick value, "
+                                        "meaning")
+    sh.add_argument("name", help="study name (see 'mrfpe study list') or path to a .py file")
     r = st_sub.add_parser("run", help="run (or resume) a study")
-    r.add_argument("name")
-    r.add_argument("--quick", action="store_true")
-    r.add_argument("--trials", type=int, default=None)
-    r.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
-    r.add_argument("--scheduler", default=None, help="dask.distributed scheduler address")
-    r.add_argument("--out", default=None)
+    r.add_argument("name", help="study name (see 'mrfpe study list') or path to a .py file")
+    r.add_argument("--quick", action="store_true",
+                   help="the study's reduced settings (same code path, about a minute)")
+    r.add_argument("--trials", type=int, default=None,
+                   help="repetitions per grid cell (overrides the n_trials setting)")
+    r.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a setting, value as JSON where it parses (repeatable); "
+                        "'mrfpe study show NAME' lists them")
+    r.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run the trials on this dask.distributed scheduler, e.g. "
+                        "tcp://HOST:8786 (default: in this process)")
+    r.add_argument("--out", default=None,
+                   help="output directory (default: studies/NAME/out, or out-quick with "
+                        "--quick); rerun with the same one to resume")
     st.set_defaults(func=_study)
     return p
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; returns the exit status (0 ok, 1 failed trials, 2 bad input)."""
     args = build_parser().parse_args(argv)
     try:
         return int(args.func(args) or 0)
     except (ValueError, FileNotFoundError) as exc:
+        if args.debug:
+            raise
         print(f"mrfpe {args.command}: error: {exc}", file=sys.stderr)
-        return 2
+        return USAGE_ERROR
+    except KeyboardInterrupt:
+        if args.debug:
+            raise
+        print(f"mrfpe {args.command}: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:  # a bug or an environment failure, not bad input
+        if args.debug:
+            raise
+        print(f"mrfpe {args.command}: internal error: {type(exc).__name__}: {exc} "
+              "(rerun with --debug for the traceback)", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -4,13 +4,15 @@ Renders a 100x100 Ward scene with 20 labels and random true parameters
 (thesis 7.2), builds the ``pls`` target (7.5–7.7), runs PMC with the thesis's
 1000 samples x 20 iterations, prints the true parameters, the MAP and its
 distance to the truth (unit cube), the posterior mean ± sd, the ESS and the
-time, and writes ``scene.nc``, ``posterior.nc`` and ``particles.png`` (the
-final particles over slices of the log PL through the MAP). ``quick`` uses a
-40x40 scene with 10 labels and 300 x 8 PMC for a run of a few seconds.
+time, and writes ``scene.nc``, ``posterior.nc``, ``particles.png`` (the
+final particles over slices of the log PL through the MAP) and ``report.md``
+(the printed report with links to those files). ``quick`` uses a 40x40 scene
+with 10 labels and 300 x 8 PMC for a run of a few seconds.
 """
 
 from __future__ import annotations
 
+import os
 import time
 from pathlib import Path
 from typing import Any
@@ -60,19 +62,37 @@ def _slices_png(target: Any, post: Any, truth: np.ndarray, path: Path, n: int) -
     plt.close(fig)
 
 
+def _prepare(out_dir: str | Path) -> Path:
+    """Create the output directory and prove it is writable, before any work."""
+    out = Path(out_dir)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        probe = out / f".write-test-{os.getpid()}"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as exc:
+        raise ValueError(f"--out {out}: cannot write there ({exc.strerror or exc})") from None
+    return out
+
+
 def main(out_dir: str | Path = "mrfpe-demo", quick: bool = False, seed: int = 0) -> int:
     """Run the demo; returns the process exit code (0 on success)."""
     import mrfpe
     from mrfpe import posterior as P
     from mrfpe.brdf import get as get_brdf
+    from mrfpe.studies.report import mean_sd
     from mrfpe.synthetic import make_scene
 
     if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
         raise ValueError(f"seed must be a non-negative integer; got {seed!r}")
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    out = _prepare(out_dir)
     shape, labels = ((40, 40), 10) if quick else ((100, 100), 20)
     n_samples, n_iterations = (300, 8) if quick else (1000, 20)
+    lines: list[str] = []
+
+    def say(text: str = "") -> None:
+        print(text)
+        lines.append(text)
 
     t0 = time.perf_counter()
     model = get_brdf("ward")
@@ -82,12 +102,14 @@ def main(out_dir: str | Path = "mrfpe-demo", quick: bool = False, seed: int = 0)
     scene.save(out / "scene.nc")
     target = mrfpe.targets.get("pls", scene)
     t_scene = time.perf_counter() - t0
-    print(f"scene: Ward {shape[0]}x{shape[1]}, {labels} labels ({t_scene:.1f} s) "
-          f"-> {out / 'scene.nc'}")
+    say(f"scene: Ward reflectance, {shape[0]}x{shape[1]} pixels, {labels} candidate depths "
+        f"(labels) per pixel ({t_scene:.1f} s) -> {out / 'scene.nc'}")
     names = list(target.param_names)
-    print("true parameters  (natural) " + "  ".join(
+    say("Parameters are shown in their natural units and in the unit cube [0, 1]^3 the "
+        "samplers work in (thesis 7.1).")
+    say("true parameters  (natural)   " + "  ".join(
         f"{n}={v:.4f}" for n, v in zip(model.param_names, theta_nat)))
-    print("                 (unit cube) " + "  ".join(f"{v:.4f}" for v in truth))
+    say("                 (unit cube) " + "  ".join(f"{v:.4f}" for v in truth))
 
     post = mrfpe.sample("pmc", target, seed=seed, progress=True, n_samples=n_samples,
                         n_iterations=n_iterations)
@@ -96,18 +118,29 @@ def main(out_dir: str | Path = "mrfpe-demo", quick: bool = False, seed: int = 0)
     mean = P.weighted_mean(post)
     sd = np.sqrt(np.clip(np.diag(P.weighted_cov(post)), 0, None))
     m_nat = np.asarray(target.to_natural(m), dtype=float).reshape(-1)
-    print(f"PMC ({post.attrs['n_target_evals'] / n_samples:.2f} full-PL evaluations per "
-          f"particle, {post.attrs['wall_time_s']:.1f} s) -> {out / 'posterior.nc'}")
-    print("MAP              (unit cube) " + "  ".join(f"{v:.4f}" for v in m)
-          + f"   log PL {m_lt:.6g}")
-    print("                 (natural) " + "  ".join(
+    per_particle = post.attrs["n_target_evals"] / (n_samples * n_iterations)
+    say(f"PMC (population Monte Carlo): {n_samples} particles x {n_iterations} iterations in "
+        f"{post.attrs['wall_time_s']:.1f} s -> {out / 'posterior.nc'}")
+    say(f"  cost: {post.attrs['n_target_evals']:.0f} evaluations of the pseudolikelihood (PL) "
+        f"over the whole image, {per_particle:.2f} per particle and iteration (the sampler "
+        "scores parts of the image at a time; this counts them as whole-image equivalents)")
+    say("MAP (the best-scoring parameters found)")
+    say("                 (unit cube) " + "  ".join(f"{v:.4f}" for v in m)
+        + f"   log PL {m_lt:.6g}")
+    say("                 (natural)   " + "  ".join(
         f"{n}={v:.4f}" for n, v in zip(model.param_names, m_nat)))
-    print(f"|MAP - truth| = {np.linalg.norm(m - truth):.4f} (unit cube; thesis Table 7.1, "
-          "Ward 20 labels, 1000 samples: 0.104 on average)")
-    print("posterior mean ± sd: " + "  ".join(
-        f"{n}={a:.4f}±{s:.4f}" for n, a, s in zip(names, mean, sd)))
-    print(f"ESS {P.ess(post):.1f} of {post.sizes['sample']}   "
-          f"total time {time.perf_counter() - t0:.1f} s")
+    say(f"|MAP - truth| = {np.linalg.norm(m - truth):.4f} in the unit cube (thesis Table 7.1, "
+        "Ward, 20 labels, 1000 particles: 0.104 on average)")
+    say("posterior mean ± sd (unit cube): " + "  ".join(
+        f"{n}={mean_sd(a, s)}" for n, a, s in zip(names, mean, sd)))
+    say(f"effective sample size (ESS) {P.ess(post):.1f} of {post.sizes['sample']} particles "
+        "(how many equally weighted draws the weighted set is worth)")
+    say(f"total time {time.perf_counter() - t0:.1f} s")
     _slices_png(target, post, truth, out / "particles.png", 15 if quick else 40)
-    print(f"figure -> {out / 'particles.png'}")
+    say(f"figure -> {out / 'particles.png'}")
+    report = out / "report.md"
+    report.write_text("# mrfpe demo\n\n```\n" + "\n".join(lines) + "\n```\n\n"
+                      "Files: [scene.nc](scene.nc), [posterior.nc](posterior.nc)\n\n"
+                      "![particles](particles.png)\n")
+    print(f"report -> {report}")
     return 0

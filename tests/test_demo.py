@@ -13,6 +13,9 @@ def test_demo_quick(tmp_path, capsys):
     out = capsys.readouterr().out
     for word in ("true parameters", "MAP", "|MAP - truth|", "posterior mean", "ESS"):
         assert word in out
+    assert "±0.0000" not in out and "full-PL" not in out  # meaningful precision, no jargon
+    report = (tmp_path / "report.md").read_text()  # the report --help promises
+    assert "posterior mean ± sd" in report and "](particles.png)" in report
     post = P.load(tmp_path / "posterior.nc")
     P.validate(post)
     assert post.attrs["sampler"] == "pmc"
@@ -23,6 +26,12 @@ def test_demo_quick(tmp_path, capsys):
 
     scene = Scene.load(tmp_path / "scene.nc")
     assert scene.true_theta is not None and np.all(np.isfinite(scene.true_theta))
+
+
+def test_demo_rejects_unwritable_out_before_work(tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    assert cli.main(["demo", "--quick", "--out", str(blocker / "out")]) == 2
 
 
 def test_demo_rejects_bad_seed(tmp_path):

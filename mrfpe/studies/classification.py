@@ -38,10 +38,35 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from mrfpe.studies._report import markdown_table, new_figure, save_figure, write_report
-from mrfpe.studies._synthetic import child_seeds
 from mrfpe.studies._thesis import AGMMP_SIGMAS, CLASSIFICATION
-from mrfpe.study import Study
+from mrfpe.studies.report import markdown_table, new_figure, save_figure, write_report
+from mrfpe.studies.synthetic import (
+    SURFACES,
+    check_sampler_options,
+    check_target_options,
+    child_seeds,
+    non_negative,
+    positive,
+    settings,
+)
+from mrfpe.study import Setting, Study
+
+
+def _brdf_names() -> tuple[str, ...]:
+    import mrfpe.brdf
+
+    return mrfpe.brdf.names()
+
+
+def _distance_names() -> list[str]:
+    import mrfpe.distances
+
+    return list(mrfpe.distances.available())
+
+
+def _non_negatives(values: list) -> None:
+    for v in values:
+        non_negative(v)
 
 MATERIAL_NAMES = ["shiny fabric", "shiny plastic", "laminated paper", "glossy brown paper",
                   "canvas", "smooth cloth", "fuzzy cloth", "t-shirt cloth",
@@ -216,16 +241,30 @@ def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
 STUDY = Study(
     name="classification",
     doc=__doc__,
-    config={
-        "n_trials": 1, "seed": 824,
-        "brdf": ["ward", "phong"], "material": list(range(12)), "specimen": [0, 1, 2, 3],
-        "materials": MATERIALS, "surface": "smooth", "noise_levels": [0.0, 0.01, 0.02, 0.04],
-        "shape": [100, 100], "n_labels": 20, "target": "pls", "target_options": {},
-        "pmc": {"n_samples": 1000, "n_iterations": 20, "variant": "thesis2"},
-        "grid_samples": 1000, "lm": {"n_seeds": 512, "max_nfev": 40},
-        "agmmp_sigmas": list(AGMMP_SIGMAS),
-        "extra_distances": ["matusita", "sliced_wasserstein"],
-    },
+    config={"n_trials": 1, "seed": 824},
+    settings=[
+        *settings("brdf", "shape", "n_labels", "target", "target_options", n_labels=20),
+        Setting("material", list(range(12)), "material indices (into materials), one grid "
+                "column each"),
+        Setting("specimen", [0, 1, 2, 3], "specimens per material: surface, light and noise "
+                "level differ"),
+        Setting("materials", MATERIALS, "unit-cube parameters of every material, per model",
+                choices=_brdf_names),
+        Setting("surface", "smooth", "surface type of every specimen", choices=SURFACES),
+        Setting("noise_levels", [0.0, 0.01, 0.02, 0.04], "pixel noise per specimen, as a "
+                "fraction of the noise-free image's 99th percentile", check=_non_negatives),
+        Setting("pmc", {"n_samples": 1000, "n_iterations": 20, "variant": "thesis2"},
+                "options of the PMC run giving the evolved set",
+                check=lambda opts: check_sampler_options("pmc", opts)),
+        Setting("grid_samples", 1000, "points of the unevolved grid set", check=positive),
+        Setting("lm", {"n_seeds": 512, "max_nfev": 40}, "options of the multiple-seed LM run",
+                check=lambda opts: check_sampler_options("lm_multiseed", opts)),
+        Setting("agmmp_sigmas", list(AGMMP_SIGMAS), "kernel widths of the AGMMP distance "
+                "columns", check=positive),
+        Setting("extra_distances", ["matusita", "sliced_wasserstein"],
+                "further registered distances to tabulate", choices=_distance_names),
+    ],
+    check=check_target_options,
     quick={"brdf": ["ward"], "material": [0, 1, 4], "specimen": [0, 1], "shape": [12, 12],
            "n_labels": 10, "pmc": {"n_samples": 64, "n_iterations": 5, "variant": "thesis2"},
            "grid_samples": 64, "lm": {"n_seeds": 8, "max_nfev": 40}},

@@ -27,15 +27,21 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from mrfpe.studies._report import markdown_table, new_figure, save_figure, write_report
-from mrfpe.studies._synthetic import (
-    DEFAULT_SURFACES,
+from mrfpe.studies.report import markdown_table, new_figure, save_figure, write_report
+from mrfpe.studies.synthetic import (
+    DEFAULTS,
+    QUICK,
+    check_problem,
+    check_sampler_options,
     child_seeds,
     distance,
-    make_problem,
+    positive,
+    problem_from_config,
     sample_traced,
+    sampler_names,
+    settings,
 )
-from mrfpe.study import Study, by_cell
+from mrfpe.study import Setting, Study, by_cell
 
 #: The steps at which the report's table reads the curves (700 ≈ PMC 64 × 20 /
 #: sub-lattice cost, 1300 ≈ PMC 125 × 20 / ..., as compared in 7.4.2).
@@ -52,15 +58,9 @@ def recorded_steps(n_steps: int, stride: int) -> np.ndarray:
 
 def trial(config: dict, repeat: int, seed: int) -> xr.Dataset:
     """One scene; every sampler for ``n_steps``; MAP distance traces."""
-    brdf = config["brdf"]
     samplers = config["samplers"]
     s_problem, s_runs = child_seeds(seed, 2)
-    prob = make_problem(brdf, s_problem, surface=config["surfaces"][brdf],
-                        shape=config["shape"], n_labels=config["n_labels"],
-                        noise=config["noise"], target=config["target"],
-                        target_options=config["target_options"],
-                        truth_range=config["truth_range"],
-                        maximiser_grid=config["maximiser_grid"])
+    prob = problem_from_config(config, s_problem)
     steps = recorded_steps(config["n_steps"], config["record_stride"])
     to_truth = np.empty((len(samplers), steps.size))
     to_max = np.empty((len(samplers), steps.size))
@@ -86,13 +86,13 @@ def trial(config: dict, repeat: int, seed: int) -> xr.Dataset:
     return ds.merge(prob.dataset())
 
 
-def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
-    """Mean and single-run curves per sampler and model; a table at selected steps."""
+def table(results: list[xr.Dataset], config: dict) -> str:
+    """Mean distances to the truth and to the maximiser at :data:`TABLE_STEPS`, per sampler."""
     cells = by_cell(results, "brdf", "n_labels")
-    means = {key: xr.concat(group, dim="trial").mean("trial") for key, group in cells.items()}
     steps = [s for s in TABLE_STEPS if s < config["n_steps"]] + [config["n_steps"]]
     rows = []
-    for (brdf, labels), mean in means.items():
+    for (brdf, labels), group in cells.items():
+        mean = xr.concat(group, dim="trial").mean("trial")
         for sampler in config["samplers"]:
             m = mean.sel(sampler=sampler)
             cols = []
@@ -100,20 +100,19 @@ def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
                 near = m.sel(step=s, method="nearest")
                 cols += [float(near["map_to_truth"]), float(near["map_to_maximiser"])]
             beaten = sum(int(ds["final_log_target"].sel(sampler=sampler)
-                             > ds["maximiser_log_prob"] + 1e-6) for ds in cells[(brdf, labels)])
-            rows.append([sampler, brdf, labels, len(cells[(brdf, labels)]), *cols,
+                             > ds["maximiser_log_prob"] + 1e-6) for ds in group)
+            rows.append([sampler, brdf, labels, len(group), *cols,
                          float(mean["maximiser_to_truth"]), beaten, float(m["wall_time_s"])])
     header = ["sampler", "brdf", "labels", "scenes",
               *(f"{s}: {r}" for s in steps for r in ("truth", "max")), "max→truth",
               "MAP > max", "time s"]
-    table = markdown_table(header, rows)
-    sections = [f"Config: `{json.dumps(config)}`.",
-                "Mean distance (unit cube) of the best-so-far sample to the truth (*truth*) and "
-                "to the target's global maximiser (*max*) after the given number of steps. The "
-                "thesis (7.4) reports that the curves approach 0.1 after about 20000 steps. "
-                "*MAP > max*: runs whose final MAP scored higher than the maximiser found for "
-                "the scene (should be 0).",
-                table]
+    return markdown_table(header, rows)
+
+
+def figures(results: list[xr.Dataset], config: dict, out_dir: Path) -> list[str]:
+    """Figs. 7.7-7.14: mean and single-scene curves per (sampler, model); their file names."""
+    cells = by_cell(results, "brdf", "n_labels")
+    means = {key: xr.concat(group, dim="trial").mean("trial") for key, group in cells.items()}
     figs = []
     for (sampler, brdf), (fig_mean, fig_single) in FIGURES.items():
         if sampler not in config["samplers"] or brdf not in config["brdf"]:
@@ -133,25 +132,46 @@ def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
             what = "mean over scenes" if kind == "mean" else "one scene"
             fig.suptitle(f"Fig. {fig_no}: {sampler} on {brdf}, {what}", fontsize=9)
             figs.append(save_figure(fig, out_dir / f"{sampler}_{brdf}_{kind}.png"))
-    sections += [f"![{f}]({f})" for f in figs]
+    return figs
+
+
+def check_config(config: dict) -> None:
+    """Every sampler accepts ``n_steps`` and ``sampler_options``."""
+    check_problem(config)
+    for name in config["samplers"]:
+        check_sampler_options(name, {"n_steps": config["n_steps"], **config["sampler_options"]})
+
+
+def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
+    """``report.md``: config, legend, the table, the figures."""
+    summary = table(results, config)
+    legend = ("Mean distance (unit cube) of the best-so-far sample to the truth (*truth*) and "
+              "to the target's global maximiser (*max*) after the given number of steps. The "
+              "thesis (7.4) reports that the curves approach 0.1 after about 20000 steps. "
+              "*MAP > max*: runs whose final MAP scored higher than the maximiser found for "
+              "the scene (should be 0).")
+    figs = figures(results, config, out_dir)
     write_report(out_dir, "Dynamically weighted MCMC convergence (thesis Figs. 7.7-7.14)",
-                 sections)
-    return table
+                 [f"Config: `{json.dumps(config)}`.", legend, summary,
+                  *(f"![{f}]({f})" for f in figs)])
+    return summary
 
 
 STUDY = Study(
     name="dw_convergence",
     doc=__doc__,
-    config={
-        "n_trials": 100, "seed": 74,
-        "brdf": ["ward", "phong"], "n_labels": [10, 20, 30, 40],
-        "surfaces": dict(DEFAULT_SURFACES), "samplers": ["dw_r", "dw_q"],
-        "n_steps": 20000, "sampler_options": {}, "record_stride": 10,
-        "shape": [100, 100], "noise": 0.0, "target": "pls", "target_options": {},
-        "truth_range": [0.1, 0.9], "maximiser_grid": 20,
-    },
-    quick={"n_trials": 2, "n_labels": [10], "n_steps": 300, "shape": [12, 12],
-           "maximiser_grid": 8},
+    config={"n_trials": 100, "seed": 74},
+    settings=[
+        *settings(*DEFAULTS),
+        Setting("samplers", ["dw_r", "dw_q"], "samplers run on every scene (R-, Q-type)",
+                choices=sampler_names),
+        Setting("n_steps", 20000, "steps per sampler run", check=positive),
+        Setting("sampler_options", {}, "further keyword options of every sampler"),
+        Setting("record_stride", 10, "keep the trace every this many steps (after step 10)",
+                check=positive),
+    ],
+    quick={**QUICK, "n_steps": 300},
+    check=check_config,
     trial=trial,
     summarise=summarise,
     grid=("brdf", "n_labels"),

@@ -26,8 +26,14 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from mrfpe.studies._report import markdown_table, new_figure, save_figure, write_report
-from mrfpe.study import Study, by_cell
+from mrfpe.studies.report import markdown_table, new_figure, save_figure, write_report
+from mrfpe.study import Setting, Study, by_cell
+
+
+def _positive(value: float | list) -> None:
+    for v in value if isinstance(value, list) else [value]:
+        if not v > 0:
+            raise ValueError(f"must be > 0; got {v!r}")
 
 
 def asymptotic_rmse(mu: np.ndarray, s: float, t: float, n: int) -> float:
@@ -94,8 +100,16 @@ def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
 STUDY = Study(
     name="importance_sampling",
     doc=__doc__,
-    config={"n_trials": 200, "seed": 1, "n_samples": [10, 100, 1000, 10000],
-            "mu": [0.3, -0.2], "sigma": 0.5, "proposal_sigma": 1.0},
+    config={"n_trials": 200, "seed": 1},
+    settings=[
+        Setting("n_samples", [10, 100, 1000, 10000], "importance samples n, one grid column "
+                "each", check=_positive),
+        Setting("mu", [0.3, -0.2], "mean μ of the Gaussian target (its length is the "
+                "dimension)"),
+        Setting("sigma", 0.5, "standard deviation s of the target", check=_positive),
+        Setting("proposal_sigma", 1.0, "standard deviation t of the proposal N(0, t²I); the "
+                "asymptote needs t² > s²/2", check=_positive),
+    ],
     quick={"n_trials": 20, "n_samples": [10, 100, 1000]},
     trial=trial,
     summarise=summarise,

@@ -30,9 +30,19 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from mrfpe.studies._report import markdown_table, new_figure, save_figure, write_report
-from mrfpe.studies._synthetic import DEFAULT_SURFACES, child_seeds, distance, make_problem
-from mrfpe.study import Study, by_cell
+from mrfpe.studies.report import markdown_table, new_figure, save_figure, write_report
+from mrfpe.studies.synthetic import (
+    DEFAULTS,
+    QUICK,
+    check_problem,
+    check_sampler_options,
+    child_seeds,
+    distance,
+    positive,
+    problem_from_config,
+    settings,
+)
+from mrfpe.study import Setting, Study, by_cell
 
 RANKINGS = ("lm_cost", "pseudolikelihood")
 
@@ -55,14 +65,8 @@ def trial(config: dict, repeat: int, seed: int) -> xr.Dataset:
     """One scene: LM from every seed, then best-of-subset distances for j = 1..n_seeds."""
     import mrfpe
 
-    brdf = config["brdf"]
     s_problem, s_lm, s_subsets = child_seeds(seed, 3)
-    prob = make_problem(brdf, s_problem, surface=config["surfaces"][brdf],
-                        shape=config["shape"], n_labels=config["n_labels"],
-                        noise=config["noise"], target=config["target"],
-                        target_options=config["target_options"],
-                        truth_range=config["truth_range"],
-                        maximiser_grid=config["maximiser_grid"])
+    prob = problem_from_config(config, s_problem)
     post = mrfpe.sample("lm_multiseed", prob.target, seed=s_lm, n_seeds=config["n_seeds"],
                         **config["lm_options"])
     optima = post["theta"].values
@@ -94,21 +98,13 @@ def _sizes(n: int) -> list[int]:
     return out
 
 
-def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
-    """Mean curves (Figs. 7.3/7.4), single runs (7.5/7.6), and a table at powers of two."""
+def tables(results: list[xr.Dataset], config: dict) -> tuple[str, str]:
+    """Best-of-j distances at powers of two, and the time per scene (markdown tables)."""
     cells = by_cell(results, "brdf", "n_labels")
-    sections = [f"Config: `{json.dumps(config)}`.",
-                "Mean over scenes of the distance (unit cube) from the best optimum of one random "
-                "subset of j LM optima to the truth (*truth*) and to the pseudolikelihood's "
-                "global maximiser (*max*). Ranking by the LM error 7.12 (the thesis's) unless "
-                "marked *PL*. *optimum > max*: scenes where an LM optimum scored higher than the "
-                "maximiser found for the scene (should be 0)."]
     rows = []
-    n = config["n_seeds"]
-    sizes = _sizes(n)
     for (brdf, labels), group in cells.items():
         mean = xr.concat(group, dim="trial").mean("trial")
-        for j in sizes:
+        for j in _sizes(config["n_seeds"]):
             m = mean.sel(subset_size=j)
             rows.append([brdf, labels, j, len(group),
                          float(m["best_to_truth"].sel(ranking="lm_cost")),
@@ -120,12 +116,15 @@ def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
                              for ds in group)])
     table = markdown_table(["brdf", "labels", "seeds j", "scenes", "truth", "max", "PL: truth",
                             "PL: max", "max→truth", "optimum > max"], rows)
-    sections.append(table)
     times = [[brdf, labels, float(np.mean([g["wall_time_s"] for g in group])),
               float(np.mean([g["n_target_evals"] for g in group]))]
              for (brdf, labels), group in cells.items()]
-    sections.append("Time per scene (all seeds):\n\n" +
-                    markdown_table(["brdf", "labels", "time s", "target evals"], times))
+    return table, markdown_table(["brdf", "labels", "time s", "target evals"], times)
+
+
+def figures(results: list[xr.Dataset], config: dict, out_dir: Path) -> list[str]:
+    """Figs. 7.3-7.6: mean and single-scene best-of-j curves per model; their file names."""
+    cells = by_cell(results, "brdf", "n_labels")
     figs = []
     for brdf, fig_mean, fig_single in (("ward", "7.3", "7.6"), ("phong", "7.4", "7.5")):
         if brdf not in config["brdf"]:
@@ -150,23 +149,38 @@ def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
                 ax.legend(fontsize=7)
             fig.suptitle(f"Multi-seed LM, {brdf}: {title}", fontsize=9)
             figs.append(save_figure(fig, out_dir / f"lm_{brdf}_{kind}.png"))
-    sections += [f"![{f}]({f})" for f in figs]
-    write_report(out_dir, "Multiple-seed Levenberg-Marquardt (thesis Figs. 7.3-7.6)", sections)
+    return figs
+
+
+def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
+    """``report.md``: config, legend, distance table, time table, figures."""
+    table, times = tables(results, config)
+    legend = ("Mean over scenes of the distance (unit cube) from the best optimum of one random "
+              "subset of j LM optima to the truth (*truth*) and to the pseudolikelihood's "
+              "global maximiser (*max*). Ranking by the LM error 7.12 (the thesis's) unless "
+              "marked *PL*. *optimum > max*: scenes where an LM optimum scored higher than the "
+              "maximiser found for the scene (should be 0).")
+    figs = figures(results, config, out_dir)
+    write_report(out_dir, "Multiple-seed Levenberg-Marquardt (thesis Figs. 7.3-7.6)", [
+        f"Config: `{json.dumps(config)}`.", legend, table,
+        "Time per scene (all seeds):\n\n" + times, *(f"![{f}]({f})" for f in figs)])
     return table
 
 
 STUDY = Study(
     name="lm_multiseed",
     doc=__doc__,
-    config={
-        "n_trials": 20, "seed": 732,
-        "brdf": ["ward", "phong"], "n_labels": [10, 20, 30, 40],
-        "surfaces": dict(DEFAULT_SURFACES), "n_seeds": 512, "lm_options": {"max_nfev": 40},
-        "shape": [100, 100], "noise": 0.0, "target": "pls", "target_options": {},
-        "truth_range": [0.1, 0.9], "maximiser_grid": 20,
-    },
-    quick={"n_trials": 2, "n_labels": [10], "n_seeds": 27, "shape": [12, 12],
-           "maximiser_grid": 8},
+    config={"n_trials": 20, "seed": 732},
+    settings=[
+        *settings(*DEFAULTS),
+        Setting("n_seeds", 512, "LM starting points, evenly spaced in the unit cube",
+                check=positive),
+        Setting("lm_options", {"max_nfev": 40},
+                "options of the lm_multiseed sampler ({} runs each seed to convergence)",
+                check=lambda opts: check_sampler_options("lm_multiseed", opts)),
+    ],
+    quick={**QUICK, "n_seeds": 27},
+    check=check_problem,
     trial=trial,
     summarise=summarise,
     grid=("brdf", "n_labels"),

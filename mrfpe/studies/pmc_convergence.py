@@ -50,29 +50,30 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from mrfpe.studies._report import markdown_table, new_figure, save_figure, write_report
-from mrfpe.studies._synthetic import (
-    DEFAULT_SURFACES,
+from mrfpe.studies._thesis import PMC_TABLE_NAMES, PMC_TABLES
+from mrfpe.studies.report import markdown_table, new_figure, save_figure, write_report
+from mrfpe.studies.synthetic import (
+    DEFAULTS,
+    QUICK,
+    check_problem,
+    check_sampler_options,
     child_seeds,
     distance,
-    make_problem,
+    positive,
+    problem_from_config,
     sample_traced,
+    settings,
     weight_variance,
 )
-from mrfpe.studies._thesis import PMC_TABLE_NAMES, PMC_TABLES
-from mrfpe.study import Study, by_cell
+from mrfpe.study import Setting, Study, by_cell
 
+#: PMC's variants (:class:`mrfpe.samplers.pmc.PMC`): Cappé-style mixture, thesis (II), (I).
+VARIANTS = ("mixture", "thesis2", "thesis1")
 
 def trial(config: dict, repeat: int, seed: int) -> xr.Dataset:
     """One scene; PMC for every variant and particle count; per-iteration statistics."""
-    brdf = config["brdf"]
     s_problem, s_runs = child_seeds(seed, 2)
-    prob = make_problem(brdf, s_problem, surface=config["surfaces"][brdf],
-                        shape=config["shape"], n_labels=config["n_labels"],
-                        noise=config["noise"], target=config["target"],
-                        target_options=config["target_options"],
-                        truth_range=config["truth_range"],
-                        maximiser_grid=config["maximiser_grid"])
+    prob = problem_from_config(config, s_problem)
     variants, sizes, T = config["variants"], config["n_samples"], config["n_iterations"]
     shape3 = (len(variants), len(sizes), T)
     stats = {k: np.full(shape3, np.nan) for k in
@@ -113,22 +114,13 @@ def _thesis(brdf: str, labels: int, n: int, T: int) -> tuple[list, list]:
     return ref[0], [v * 1e-6 for v in ref[1]]
 
 
-def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
-    """Tables in the thesis's layout (ours beside Tables 7.1-7.4), a summary and figures."""
+def tables(results: list[xr.Dataset], config: dict) -> tuple[str, list[str]]:
+    """The final-iteration summary table, and one section per (model, labels) in the
+    thesis's layout (ours beside Tables 7.1-7.4)."""
     variants, sizes, T = config["variants"], config["n_samples"], config["n_iterations"]
-    main = "thesis2" if "thesis2" in variants else variants[0]
-    sections = [
-        f"Config: `{json.dumps(config)}`.",
-        "Distances are Euclidean in the unit cube. *truth*: best-so-far MAP to the true "
-        "parameters (the thesis's \"MAP dist\"); *max*: MAP to the target's global maximiser; "
-        "*var*: variance of the normalised weights × 10⁶. Thesis columns: Tables 7.1-7.4 "
-        "(PMC (II), 100 runs, highest-weight particle per iteration). *MAP > max*: runs "
-        "whose MAP scored higher than the maximiser found for the scene (it should be 0; "
-        "otherwise the maximiser search missed the peak and *max* distances are suspect).",
-    ]
-    summary_rows, figs = [], []
-    cells = by_cell(results, "brdf", "n_labels")
-    for (brdf, labels), group in cells.items():
+    main = _main_variant(variants)
+    sections, summary_rows = [], []
+    for (brdf, labels), group in by_cell(results, "brdf", "n_labels").items():
         mean = xr.concat(group, dim="trial").mean("trial")
         max_to_truth = float(mean["maximiser_to_truth"])
         header = ["iter"]
@@ -159,7 +151,15 @@ def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
     summary = markdown_table(
         ["brdf", "labels", "variant", "N", "trials", "MAP→truth", "thesis", "MAP→max",
          "max→truth", "MAP > max", "time s", "evals"], summary_rows)
-    sections.insert(2, "## Final iteration, all variants\n\n" + summary)
+    return summary, sections
+
+
+def figures(results: list[xr.Dataset], config: dict, out_dir: Path) -> list[str]:
+    """Mean MAP distance per iteration, one PNG per (model, variant); their file names."""
+    variants, sizes, T = config["variants"], config["n_samples"], config["n_iterations"]
+    main = _main_variant(variants)
+    cells = by_cell(results, "brdf", "n_labels")
+    figs = []
     for brdf in config["brdf"]:
         for variant in variants:
             width = max(4.8, 3.2 * len(config["n_labels"]))  # room for the title
@@ -183,26 +183,56 @@ def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
             axes[0, -1].legend(fontsize=6)
             fig.suptitle(f"PMC `{variant}` on {brdf} ({config['surfaces'][brdf]} surfaces)")
             figs.append(save_figure(fig, out_dir / f"pmc_{brdf}_{variant}.png"))
-    sections += [f"![{f}]({f})" for f in figs]
-    write_report(out_dir, "PMC convergence (thesis Tables 7.1-7.4)", sections)
+    return figs
+
+
+def _main_variant(variants: list[str]) -> str:
+    return "thesis2" if "thesis2" in variants else variants[0]
+
+
+def check_config(config: dict) -> None:
+    """Every PMC run of a trial can be built: variant × particle count × ``pmc_options``."""
+    check_problem(config)
+    for variant in config["variants"]:
+        for n in config["n_samples"]:
+            check_sampler_options("pmc", {"n_samples": n, "n_iterations": config["n_iterations"],
+                                          "variant": variant, "keep_history": True,
+                                          **config["pmc_options"]})
+
+
+def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
+    """``report.md``: config, legend, summary table, per-cell tables, figures."""
+    summary, sections = tables(results, config)
+    legend = (
+        "Distances are Euclidean in the unit cube. *truth*: best-so-far MAP to the true "
+        "parameters (the thesis's \"MAP dist\"); *max*: MAP to the target's global maximiser; "
+        "*var*: variance of the normalised weights × 10⁶. Thesis columns: Tables 7.1-7.4 "
+        "(PMC (II), 100 runs, highest-weight particle per iteration). *MAP > max*: runs "
+        "whose MAP scored higher than the maximiser found for the scene (it should be 0; "
+        "otherwise the maximiser search missed the peak and *max* distances are suspect).")
+    figs = figures(results, config, out_dir)
+    write_report(out_dir, "PMC convergence (thesis Tables 7.1-7.4)", [
+        f"Config: `{json.dumps(config)}`.", legend,
+        "## Final iteration, all variants\n\n" + summary, *sections,
+        *(f"![{f}]({f})" for f in figs)])
     return summary
 
 
 STUDY = Study(
     name="pmc_convergence",
     doc=__doc__,
-    config={
-        "n_trials": 100, "seed": 741,
-        "brdf": ["ward", "phong"], "n_labels": [10, 20, 30, 40],
-        "surfaces": dict(DEFAULT_SURFACES),
-        "n_samples": [1000, 125, 64], "n_iterations": 20,
-        "variants": ["thesis2", "mixture"], "pmc_options": {},
-        "shape": [100, 100], "noise": 0.0, "target": "pls",
-        "target_options": {"dtype": "float32"},
-        "truth_range": [0.1, 0.9], "maximiser_grid": 20,
-    },
-    quick={"n_trials": 2, "n_labels": [10], "n_samples": [64, 27], "n_iterations": 5,
-           "shape": [12, 12], "maximiser_grid": 8},
+    config={"n_trials": 100, "seed": 741},
+    settings=[
+        *settings(*DEFAULTS, target_options={"dtype": "float32"}),
+        Setting("n_samples", [1000, 125, 64], "PMC particle counts N, each run on every scene",
+                check=positive),
+        Setting("n_iterations", 20, "PMC iterations per run", check=positive),
+        Setting("variants", ["thesis2", "mixture"], "PMC variants, each run on every scene",
+                choices=VARIANTS),
+        Setting("pmc_options", {}, "further keyword options of the PMC sampler"),
+    ],
+    check=check_config,
+    quick={**QUICK, "n_samples": [64, 27], "n_iterations": 5},
     trial=trial,
     summarise=summarise,
     grid=("brdf", "n_labels"),

@@ -28,9 +28,16 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from mrfpe.studies._report import blank_figure, markdown_table, save_figure, write_report
-from mrfpe.studies._synthetic import DEFAULT_SURFACES, child_seeds, distance
-from mrfpe.study import Study
+from mrfpe.studies.report import blank_figure, markdown_table, save_figure, write_report
+from mrfpe.studies.synthetic import (
+    check_sampler_options,
+    check_target_options,
+    child_seeds,
+    distance,
+    positive,
+    settings,
+)
+from mrfpe.study import Setting, Study
 
 CASES = [["ward", [0.7, 0.4, 0.9]], ["ward", [0.8, 0.9, 0.5]], ["phong", [0.8, 0.9, 0.5]]]
 THESIS_FIGURES = ["7.15-7.19", "7.20-7.24", "7.25-7.28"]
@@ -142,13 +149,20 @@ def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
 STUDY = Study(
     name="posterior_slices",
     doc=__doc__,
-    config={
-        "n_trials": 1, "seed": 715, "case": [0, 1, 2], "cases": CASES,
-        "surfaces": dict(DEFAULT_SURFACES), "shape": [100, 100], "n_labels": 20,
-        "target": "pls", "target_options": {},
-        "pmc": {"n_samples": 1000, "n_iterations": 20, "variant": "thesis2"},
-        "iterations": [1, 5, 10, 15, 20], "volume_grid": 25, "log_floor": 200.0,
-    },
+    config={"n_trials": 1, "seed": 715},
+    settings=[
+        *settings("surfaces", "shape", "n_labels", "target", "target_options", n_labels=20),
+        Setting("case", [0, 1, 2], "case indices (into cases), one grid column each"),
+        Setting("cases", CASES, "[model, unit-cube truth] of every case (Figs. 7.15-7.28)"),
+        Setting("pmc", {"n_samples": 1000, "n_iterations": 20, "variant": "thesis2"},
+                "options of the PMC run", check=lambda opts: check_sampler_options("pmc", opts)),
+        Setting("iterations", [1, 5, 10, 15, 20], "PMC iterations shown, one figure row each",
+                check=positive),
+        Setting("volume_grid", 25, "grid points per axis of the PL volume", check=positive),
+        Setting("log_floor", 200.0, "slices are clipped this many log units below the maximum",
+                check=positive),
+    ],
+    check=check_target_options,
     quick={"case": [0, 2], "shape": [12, 12], "n_labels": 10,
            "pmc": {"n_samples": 64, "n_iterations": 5, "variant": "thesis2"},
            "iterations": [1, 3, 5], "volume_grid": 10},

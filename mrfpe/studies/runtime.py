@@ -32,21 +32,48 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from mrfpe.studies._report import markdown_table, new_figure, save_figure, write_report
-from mrfpe.studies._synthetic import (
+from mrfpe.studies._thesis import RUNTIME_MINUTES
+from mrfpe.studies.report import markdown_table, new_figure, save_figure, write_report
+from mrfpe.studies.synthetic import (
+    SURFACES,
+    check_runs,
+    check_target_options,
     child_seeds,
     distance,
     first_reach,
     make_problem,
     maximiser,
+    positive,
     sample_traced,
+    settings,
 )
-from mrfpe.studies._thesis import RUNTIME_MINUTES
-from mrfpe.study import Study, by_cell
+from mrfpe.study import Setting, Study, by_cell
+
+
+def _brdf_names() -> tuple[str, ...]:
+    import mrfpe.brdf
+
+    return mrfpe.brdf.names()
 
 #: Which run is compared with which column of Table 8.12.
 THESIS_COLUMN = {"pmc_thesis2": "pmc", "pmc": "pmc", "dw_r": "dw_r",
                  "lm_multiseed": "lm_multiseed"}
+
+
+#: The thesis's runs (Table 8.12 settings where it gives them).
+RUNS = {
+    "pmc": {"sampler": "pmc", "n_samples": 1000, "n_iterations": 20},
+    "pmc_thesis2": {"sampler": "pmc", "n_samples": 1000, "n_iterations": 20,
+                    "variant": "thesis2"},
+    "dw_r": {"sampler": "dw_r", "n_steps": 20000},
+    "dw_q": {"sampler": "dw_q", "n_steps": 20000},
+    "lm_multiseed": {"sampler": "lm_multiseed", "n_seeds": 512, "max_nfev": 40},
+    "nlopt_multiseed": {"sampler": "nlopt_multiseed", "n_seeds": 512},
+    "mh": {"sampler": "mh"},
+    "emcee": {"sampler": "emcee"},
+    "sir": {"sampler": "sir"},
+    "ppf": {"sampler": "ppf"},
+}
 
 
 def trial(config: dict, repeat: int, seed: int) -> xr.Dataset:
@@ -148,25 +175,18 @@ def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
 STUDY = Study(
     name="runtime",
     doc=__doc__,
-    config={
-        "n_trials": 3, "seed": 812, "n_labels": [10, 20, 30, 40],
-        "brdf": "ward", "surface": "smooth", "shape": [100, 100], "noise": 0.0,
-        "target": "pls", "target_options": {}, "truth_range": [0.1, 0.9],
-        "maximiser_grid": 20, "level": 0.1,
-        "runs": {
-            "pmc": {"sampler": "pmc", "n_samples": 1000, "n_iterations": 20},
-            "pmc_thesis2": {"sampler": "pmc", "n_samples": 1000, "n_iterations": 20,
-                            "variant": "thesis2"},
-            "dw_r": {"sampler": "dw_r", "n_steps": 20000},
-            "dw_q": {"sampler": "dw_q", "n_steps": 20000},
-            "lm_multiseed": {"sampler": "lm_multiseed", "n_seeds": 512, "max_nfev": 40},
-            "nlopt_multiseed": {"sampler": "nlopt_multiseed", "n_seeds": 512},
-            "mh": {"sampler": "mh"},
-            "emcee": {"sampler": "emcee"},
-            "sir": {"sampler": "sir"},
-            "ppf": {"sampler": "ppf"},
-        },
-    },
+    config={"n_trials": 3, "seed": 812},
+    settings=[
+        *settings("n_labels", "shape", "noise", "target", "target_options", "truth_range",
+                  "maximiser_grid"),
+        Setting("brdf", "ward", "reflectance model of every scene", choices=_brdf_names),
+        Setting("surface", "smooth", "surface type of every scene", choices=SURFACES),
+        Setting("level", 0.1, "distance (unit cube) a MAP must come within to count as reached",
+                check=positive),
+        Setting("runs", RUNS, "sampler runs per scene, {label: {\"sampler\": NAME, option: "
+                "value}}", check=check_runs),
+    ],
+    check=check_target_options,
     quick={
         "n_trials": 1, "n_labels": [10, 20], "shape": [12, 12], "maximiser_grid": 8,
         "runs": {

@@ -28,9 +28,24 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from mrfpe.studies._report import markdown_table, new_figure, save_figure, write_report
-from mrfpe.studies._synthetic import child_seeds, distance, maximiser
-from mrfpe.study import Study, by_cell
+from mrfpe.studies.report import markdown_table, new_figure, save_figure, write_report
+from mrfpe.studies.synthetic import (
+    SURFACES,
+    check_runs,
+    check_target_options,
+    child_seeds,
+    distance,
+    maximiser,
+    positive,
+    settings,
+)
+from mrfpe.study import Setting, Study, by_cell
+
+
+def _target_names() -> tuple[str, ...]:
+    import mrfpe.targets
+
+    return mrfpe.targets.names()
 
 
 def trial(config: dict, repeat: int, seed: int) -> xr.Dataset:
@@ -92,13 +107,13 @@ def _mean_se(x: np.ndarray) -> tuple[float, float]:
     return float(x.mean()), float(x.std(ddof=1) / np.sqrt(x.size)) if x.size > 1 else np.nan
 
 
-def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
-    """Table per (model, surface, σ_b, target); figure of the bias against σ_b."""
-    cells = by_cell(results, "brdf", "surface", "sigma_b_scale")
+def _cells(results: list[xr.Dataset], config: dict) -> tuple[list[list], dict]:
+    """Table rows per (model, surface, σ_b, target) and the bias curves for the figure."""
     runs = list(config["runs"])
     rows = []
     curves: dict = {}
-    for (brdf, surface, scale), group in cells.items():
+    for (brdf, surface, scale), group in by_cell(results, "brdf", "surface",
+                                                 "sigma_b_scale").items():
         stack = xr.concat(group, dim="trial")
         for name in config["targets"]:
             s = stack.sel(target=name)
@@ -111,11 +126,21 @@ def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
             rows.append([*row, beaten])
             curves.setdefault((brdf, surface, name), []).append(
                 (scale, bias, _mean_se(s["map_to_maximiser"].sel(run=runs[0]).values)[0]))
+    return rows, curves
+
+
+def table(rows: list[list], config: dict) -> str:
+    """The markdown table of :func:`_cells`'s rows."""
     header = ["brdf", "surface", "σ_b × auto", "target", "scenes", "max→truth", "± s.e."]
-    for run in runs:
+    for run in config["runs"]:
         header += [f"{run}: MAP→max", f"{run}: MAP→truth"]
     header.append("MAP > max")
-    table = markdown_table(header, rows)
+    return markdown_table(header, rows)
+
+
+def figure(curves: dict, config: dict, out_dir: Path) -> str:
+    """Bias and sampler error against σ_b, one panel per (model, surface); the file name."""
+    runs = list(config["runs"])
     panels = [(b, s) for b in config["brdf"] for s in config["surface"]]
     fig, axes = new_figure(1, len(panels), size=(3.6 * len(panels), 3.4), sharey=True)
     for ax, (brdf, surface) in zip(axes[0], panels):
@@ -129,7 +154,14 @@ def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
         ax.set(xscale="log", yscale="log", xlabel="σ_b / auto", title=f"{brdf}, {surface}")
     axes[0, 0].set_ylabel("mean distance (unit cube)")
     axes[0, -1].legend(fontsize=6)
-    png = save_figure(fig, out_dir / "target_bias.png")
+    return save_figure(fig, out_dir / "target_bias.png")
+
+
+def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
+    """``report.md``: config, legend, table per (model, surface, σ_b, target), figure."""
+    rows, curves = _cells(results, config)
+    summary = table(rows, config)
+    png = figure(curves, config, out_dir)
     write_report(out_dir, "Target bias and sampler error (beyond the thesis)", [
         f"Config: `{json.dumps(config)}`.",
         "*max→truth*: distance from the target's global maximiser to the true parameters "
@@ -138,22 +170,30 @@ def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
         "truth would report. Means over scenes. *MAP > max*: runs whose MAP scored higher "
         "than the maximiser found (should be 0; otherwise the maximiser search missed the "
         "peak).",
-        table, f"![bias]({png})"])
-    return table
+        summary, f"![bias]({png})"])
+    return summary
 
 
 STUDY = Study(
     name="target_bias",
     doc=__doc__,
-    config={
-        "n_trials": 10, "seed": 99,
-        "brdf": ["ward", "phong"], "surface": ["smooth", "jagged"],
-        "sigma_b_scale": [0.5, 1.0, 2.0, 4.0],
-        "targets": ["pls", "fit", "pml"], "target_options": {},
-        "runs": {"pmc": {"sampler": "pmc", "n_samples": 1000, "n_iterations": 20}},
-        "shape": [100, 100], "n_labels": 20, "noise": 0.01,
-        "truth_range": [0.1, 0.9], "maximiser_grid": 20,
-    },
+    config={"n_trials": 10, "seed": 99},
+    settings=[
+        *settings("brdf", "shape", "n_labels", "noise", "truth_range", "maximiser_grid",
+                  n_labels=20, noise=0.01),
+        Setting("surface", list(SURFACES), "surface types, one grid column each",
+                choices=SURFACES),
+        Setting("sigma_b_scale", [0.5, 1.0, 2.0, 4.0],
+                "data-energy scale σ_b as multiples of auto_sigma_b", check=positive),
+        Setting("targets", ["pls", "fit", "pml"], "targets built on every scene",
+                choices=_target_names),
+        Setting("target_options", {}, "per-target keyword options, {target: {option: value}}",
+                choices=_target_names),
+        Setting("runs", {"pmc": {"sampler": "pmc", "n_samples": 1000, "n_iterations": 20}},
+                "sampler runs per target, {label: {\"sampler\": NAME, option: value}}",
+                check=check_runs),
+    ],
+    check=check_target_options,
     quick={"n_trials": 1, "brdf": ["ward"], "sigma_b_scale": [1.0, 4.0], "shape": [12, 12],
            "n_labels": 10, "maximiser_grid": 8,
            "runs": {"pmc": {"sampler": "pmc", "n_samples": 64, "n_iterations": 5}}},

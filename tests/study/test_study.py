@@ -32,7 +32,12 @@ def counting(calls: list, fail_when=None) -> S.Study:
 
 
 def files(out: Path) -> list[str]:
+    """Every file in ``out/trials`` (results, error files, temporaries)."""
     return sorted(p.name for p in (out / "trials").iterdir())
+
+
+def results(out: Path) -> list[str]:
+    return [f for f in files(out) if f.endswith(".nc")]
 
 
 def test_one_netcdf_per_trial_with_provenance(tmp_path):
@@ -150,11 +155,14 @@ def test_failed_trials_are_reported_and_retried(tmp_path):
     rep = S.run(st, cfg, tmp_path, progress=False)
     assert not rep.ok and [f[0] for f in rep.failures] == ["n_samples=100,repeat=0001"]
     assert "RuntimeError: boom" in rep.failures[0][1]
-    assert len(files(tmp_path)) == 5 and not (tmp_path / "report.md").exists()
-    assert "FAILED n_samples=100,repeat=0001" in rep.text()
+    assert len(results(tmp_path)) == 5 and not (tmp_path / "report.md").exists()
+    error = tmp_path / "trials" / "n_samples=100,repeat=0001.error.txt"
+    assert "RuntimeError: boom" in error.read_text() and "Traceback" in error.read_text()
+    assert "FAILED n_samples=100,repeat=0001" in rep.text() and str(error) in rep.text()
     calls.clear()
     rep = S.run(counting(calls), cfg, tmp_path, progress=False)
     assert calls == [(100, 1)] and rep.ok and (tmp_path / "report.md").exists()
+    assert not error.exists()  # the retry succeeded: no stale error file
 
 
 def test_unserialisable_result_leaves_no_partial_file(tmp_path):
@@ -164,7 +172,8 @@ def test_unserialisable_result_leaves_no_partial_file(tmp_path):
     st = dataclasses.replace(toy.STUDY, trial=bad)
     rep = S.run(st, S.resolve_config(st, overrides=SMALL, n_trials=1), tmp_path, progress=False)
     assert len(rep.failures) == 2
-    assert files(tmp_path) == []  # neither results nor temporary files
+    assert results(tmp_path) == []  # no partial result
+    assert all(f.endswith(".error.txt") for f in files(tmp_path))  # and no temporary file
 
 
 def test_trial_must_return_a_dataset(tmp_path):

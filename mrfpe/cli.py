@@ -11,7 +11,6 @@ from __future__ import annotations
 import argparse
 import difflib
 import inspect
-import os
 import sys
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -110,7 +109,7 @@ def _distances(args: argparse.Namespace) -> int:
 
 def _estimate(args: argparse.Namespace) -> int:
     import mrfpe
-    from mrfpe.netcdf import check_readable, check_writable, tmp_path_for
+    from mrfpe.netcdf import check_readable, check_writable
     from mrfpe.posterior import save
     from mrfpe.samplers import get as get_sampler
 
@@ -132,13 +131,7 @@ def _estimate(args: argparse.Namespace) -> int:
     except TypeError as exc:
         raise ValueError(f"--target-option: {exc}") from None
     post = sampler.run(target, seed=args.seed, progress=not args.quiet)
-    tmp = tmp_path_for(out)  # a kill mid-write must not leave a partial posterior
-    try:
-        save(post, tmp)
-        os.replace(tmp, out)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+    save(post, out)  # atomic: a kill mid-write never leaves a partial posterior
     m = post["map_theta"].isel(step=-1).values
     print(f"MAP (sampling space): {m.round(4).tolist()}  -> {out}")
     return 0

@@ -286,12 +286,11 @@ class Scene:
 
     @classmethod
     def load(cls, path: str | Path) -> Scene:
-        """Read a scene written by :meth:`save`."""
-        import xarray as xr
+        """Read a scene written by :meth:`save` (a missing, truncated or corrupt file
+        raises ``ValueError`` naming it, :func:`mrfpe.netcdf.open_dataset`)."""
+        from mrfpe.netcdf import open_dataset
 
-        with xr.open_dataset(path, engine="netcdf4") as ds:
-            ds = ds.load()
-        return cls.from_dataset(ds)
+        return cls.from_dataset(open_dataset(path, "scene"))
 
     def __repr__(self) -> str:
         H, W = self.image.shape

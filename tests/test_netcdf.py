@@ -52,3 +52,16 @@ def test_checks(tmp_path):
         netcdf.check_writable(tmp_path)
     assert netcdf.check_writable(tmp_path / "x.nc") == tmp_path / "x.nc"
     assert list(tmp_path.iterdir()) == []  # the probe is gone
+
+
+def test_library_loaders_name_a_corrupt_file(tmp_path):
+    """posterior.load and Scene.load read through open_dataset: a corrupt file is named."""
+    from mrfpe import posterior as P
+    from mrfpe.scene import Scene
+
+    bad = tmp_path / "bad.nc"
+    bad.write_bytes(b"\x89HDF\r\n\x1a\n" + b"0" * 100)
+    with pytest.raises(ValueError, match=r"bad\.nc: not a readable netCDF posterior"):
+        P.load(bad)
+    with pytest.raises(ValueError, match=r"bad\.nc: not a readable netCDF scene"):
+        Scene.load(bad)

@@ -65,7 +65,11 @@ def save(post: xr.Dataset, path: Any) -> None:
     Float variables keep NaN and ±inf (no fill-value masking on read), string
     coordinates come back as fixed-width unicode, and attributes netCDF cannot
     store (bool, None, dicts, lists of strings) are stored as JSON and decoded.
+    The write is atomic (:func:`mrfpe.netcdf.write_atomic`): an interrupted save
+    never leaves a partial file at ``path``.
     """
+    from mrfpe.netcdf import write_atomic
+
     ds = post.copy()
     ds.attrs = _encode_attrs(post.attrs)
     for name, var in ds.variables.items():
@@ -73,14 +77,19 @@ def save(post: xr.Dataset, path: Any) -> None:
         var.encoding = {}
         if var.dtype.kind == "f":
             var.encoding["_FillValue"] = None  # NaN is data, not "missing"
-    ds.to_netcdf(path, engine="netcdf4", format="NETCDF4")
+    write_atomic(ds, path, format="NETCDF4")
 
 
 def load(path: Any) -> xr.Dataset:
-    """Read a posterior written by :func:`save` (fully into memory; the file is closed)."""
-    with xr.open_dataset(path, engine="netcdf4", mask_and_scale=False, decode_times=False,
-                         decode_timedelta=False) as f:
-        ds = f.load()
+    """Read a posterior written by :func:`save` (fully into memory; the file is closed).
+
+    A missing, truncated or corrupt file raises ``ValueError`` naming it
+    (:func:`mrfpe.netcdf.open_dataset`).
+    """
+    from mrfpe.netcdf import open_dataset
+
+    ds = open_dataset(path, "posterior", mask_and_scale=False, decode_times=False,
+                      decode_timedelta=False)
     ds.attrs = _decode_attrs(ds.attrs)
     for name, var in ds.variables.items():
         var.attrs = _decode_attrs(var.attrs)

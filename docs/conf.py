@@ -54,6 +54,16 @@ html_theme = "furo"
 html_title = f"mrfpe {release}"
 html_theme_options = {"sidebar_hide_name": False}
 
+# Formulas are typeset by MathJax from its CDN (Sphinx's default). For offline
+# viewing point MRFPE_DOCS_MATHJAX at a local copy, e.g. Debian's libjs-mathjax:
+# MRFPE_DOCS_MATHJAX="file:///usr/share/javascript/mathjax/MathJax.js?config=TeX-AMS-MML_HTMLorMML"
+if os.environ.get("MRFPE_DOCS_MATHJAX"):
+    mathjax_path = os.environ["MRFPE_DOCS_MATHJAX"]
+    if "config=" in mathjax_path:  # MathJax 2 (as Debian ships it): process the math spans
+        mathjax2_config = {"tex2jax": {"processClass": "math|tex2jax_process|output_area",
+                                       "inlineMath": [["\\(", "\\)"]],
+                                       "displayMath": [["\\[", "\\]"]]}}
+
 # -- MyST / MyST-NB -----------------------------------------------------------
 myst_enable_extensions = ["dollarmath", "amsmath", "colon_fence", "deflist"]
 myst_heading_anchors = 3

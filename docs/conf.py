@@ -73,6 +73,7 @@ nb_execution_timeout = 300  # seconds per notebook; each is meant to take well u
 nb_execution_raise_on_error = True  # a failing tutorial fails the build
 nb_execution_show_tb = True
 nb_merge_streams = True
+nb_render_markdown_format = "myst"  # Markdown outputs (study reports) keep their tables
 nb_execution_excludepatterns = []
 # Tutorials run with the repository root as working directory (paths like studies/).
 nb_execution_in_temp = False

@@ -258,6 +258,47 @@ def _escape(app, what, name, obj, options, lines):  # noqa: ARG001
                 literal_block, base = True, indent
 
 
+def _shadowed_modules() -> list[str]:
+    """Submodules hidden behind a package attribute of the same name.
+
+    ``mrfpe.samplers.registry`` is both a module and the package's ``registry``
+    object; autosummary resolves the name to the object, so its page would
+    describe the object and lose the module. Such pages are rewritten below.
+    """
+    out = []
+    for modname in _all_modules():
+        parent, _, leaf = modname.rpartition(".")
+        if parent and not inspect.ismodule(getattr(sys.modules.get(parent), leaf, None)):
+            out.append(modname)
+    return out
+
+
+def _write_shadowed(app):
+    gen = HERE / "api" / "generated"
+    for modname in _shadowed_modules():
+        here = defined_here(modname)
+        lines = [modname, "=" * len(modname), "", f".. automodule:: {modname}",
+                 "   :no-members:", ""]
+        if here:
+            lines += [".. rubric:: Contents", "", ".. autosummary::", "   :nosignatures:", ""]
+            lines += [f"   {n}" for n in here] + [""]
+            for n in here:
+                kind = kind_of(modname, n)
+                lines.append(f".. auto{kind}:: {modname}.{n}")
+                if kind == "class":
+                    lines += ["   :members:", "   :show-inheritance:"]
+                lines.append("")
+        elsewhere = reexported_here(modname)
+        if elsewhere:
+            lines += [".. rubric:: Re-exported here", ""]
+            lines += [f"* ``{modname}.{n}``: :py:obj:`{t}`" for n, t in elsewhere] + [""]
+        path = gen / f"{modname}.rst"
+        text = "\n".join(lines)
+        if not path.exists() or path.read_text() != text:
+            path.write_text(text)
+
+
 def setup(app):
+    app.connect("builder-inited", _write_shadowed, priority=900)  # after autosummary
     app.connect("autodoc-process-docstring", _raw_fixes, priority=100)  # before napoleon
     app.connect("autodoc-process-docstring", _escape, priority=900)  # after napoleon

@@ -197,7 +197,7 @@ autosummary_context = {
 # plain-text math such as ``|z_j|`` or ``|Σ₂|`` reads as an reST substitution,
 # and ``x``× as an unterminated literal. The fixes below are applied to the text
 # autodoc hands to docutils only; the source docstrings are left to their owners
-# (listed in docs/api/docstring-notes.md).
+# (each fix names its docstring in ``_DOCSTRING_FIXES``).
 
 _LITERAL = re.compile(r"(``.+?``)")
 _CLOSE_OK = set(" \t-.,:;!?\\/'\")]}>")

@@ -22,10 +22,11 @@ Two triangulations live on the lattice:
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
-__all__ = ["Lattice"]
+__all__ = ["PARTITION_KINDS", "Lattice", "split_ids"]
 
 
 def _csr(keys: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -152,17 +153,54 @@ class Lattice:
         ``kind="strided"``: ``S^n = {n, n+k, n+2k, ...}`` (thesis 5.68, 7.8 with k=3).
         ``kind="block"``: ``k`` contiguous runs of node ids of (nearly) equal size
         (thesis 5.67, which fixes the block *size*; here the number of blocks is given).
+        See :func:`split_ids`, the one rule every target's ``partition`` uses.
         """
-        if isinstance(k, bool) or not isinstance(k, int | np.integer):
-            raise ValueError(f"k must be an integer; got {k!r}")
-        if not 1 <= k <= self.n_nodes:
-            raise ValueError(f"k must be in [1, n_nodes={self.n_nodes}]; got {k}")
-        ids = np.arange(self.n_nodes, dtype=np.int64)
-        if kind == "strided":
-            return [ids[n::k] for n in range(int(k))]
-        if kind == "block":
-            return list(np.array_split(ids, int(k)))
-        raise ValueError(f"kind must be 'strided' or 'block'; got {kind!r}")
+        return split_ids(np.arange(self.n_nodes, dtype=np.int64), k, kind, what="n_nodes")
+
+
+#: Sub-lattice split rules accepted by :func:`split_ids` (and every target's ``partition``).
+PARTITION_KINDS = ("strided", "block")
+
+
+def split_ids(ids: Any, k: Any, kind: str = "strided", *, what: str = "n") -> list[np.ndarray]:
+    """Split ``ids`` into ``k`` disjoint, covering sub-lattices: THE sub-lattice rule.
+
+    ``kind="strided"``: ``S^n = {ids[n], ids[n+k], ...}`` (thesis 5.68, 7.8);
+    ``kind="block"``: ``k`` contiguous runs of nearly equal size (5.67, with the
+    number of blocks rather than their size given). Every ``partition`` in mrfpe
+    (the lattice's, the BRDF and Potts targets', the analytic test targets')
+    calls this, so a sub-lattice means the same thing everywhere.
+
+    Parameters
+    ----------
+    ids : (n,) array
+        The ids to split (in order).
+    k : int
+        Number of parts, ``1 <= k <= n``.
+    kind : "strided" | "block"
+    what : str
+        How ``n`` is called in the error message.
+
+    Returns
+    -------
+    list of k arrays, in order, whose concatenation is a permutation of ``ids``.
+
+    Raises
+    ------
+    ValueError
+        If ``k`` is not an integer in ``[1, n]`` or ``kind`` is unknown.
+    """
+    ids = np.asarray(ids)
+    n = ids.shape[0]
+    if isinstance(k, bool) or not isinstance(k, int | np.integer):
+        raise ValueError(f"k must be an integer in [1, {what}={n}]; got {k!r}")
+    if not 1 <= k <= n:
+        raise ValueError(f"k must be in [1, {what}={n}]; got {k}")
+    if kind == "strided":
+        return [ids[j::int(k)] for j in range(int(k))]
+    if kind == "block":
+        return list(np.array_split(ids, int(k)))
+    raise ValueError(f"kind must be 'strided' or 'block'; got {kind!r}")
 
 
 def _csr_from_pairs(keys: np.ndarray, n: int, group: int) -> tuple[np.ndarray, np.ndarray]:

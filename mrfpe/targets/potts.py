@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from mrfpe.lattice import split_ids
 from mrfpe.targets.base import Target, as_theta_batch
 
 __all__ = [
@@ -186,15 +187,7 @@ class PottsPseudoLikelihood(Target):
 
     def partition(self, k: int, kind: str = "strided") -> list[PottsPseudoLikelihood]:
         """Sub-lattice PLs over disjoint site subsets (5.67, 5.68) that sum to this one."""
-        n = self.sites.shape[0]
-        if isinstance(k, bool) or not isinstance(k, int | np.integer) or not 1 <= k <= n:
-            raise ValueError(f"k must be an integer in [1, {n}]; got {k!r}")
-        if kind == "strided":
-            groups = [self.sites[j::int(k)] for j in range(int(k))]
-        elif kind == "block":
-            groups = np.array_split(self.sites, int(k))
-        else:
-            raise ValueError(f"kind must be 'strided' or 'block'; got {kind!r}")
+        groups = split_ids(self.sites, k, kind, what="n_sites")
         parts = []
         for g in groups:
             part = object.__new__(type(self))

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from mrfpe.lattice import split_ids
 from mrfpe.targets.base import Target, as_theta_batch
 
 __all__ = ["CorrelatedGaussian", "MostlyMinusInf", "TwoModes"]
@@ -78,12 +79,7 @@ class CorrelatedGaussian(Target):
 
     def partition(self, k: int, kind: str = "strided") -> list[CorrelatedGaussian]:
         """``k`` sub-targets over disjoint observation subsets; their log_probs sum to ours."""
-        if isinstance(k, bool) or not isinstance(k, int | np.integer) or not 1 <= k <= self._k:
-            raise ValueError(f"k must be an integer in [1, {self._k}]; got {k!r}")
-        if kind not in ("strided", "block"):
-            raise ValueError(f"kind must be 'strided' or 'block'; got {kind!r}")
-        idx = ([np.arange(n, self._k, k) for n in range(k)] if kind == "strided"
-               else np.array_split(np.arange(self._k), k))
+        idx = split_ids(np.arange(self._k), k, kind, what="n_obs")
         parts = []
         for ix in idx:
             sub = CorrelatedGaussian(self.n_total, _obs=self.obs[ix],

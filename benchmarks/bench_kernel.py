@@ -15,8 +15,9 @@ repeats, so a shared, noisy machine slows both alike.
   (:func:`mrfpe.threads.vector_width`), 2 FMA ports (Intel with AVX-512: 2 x 512
   bit; AMD Zen 4: 2 x 256 bit, i.e. 512-bit ops at half rate), the clock from
   ``cpu MHz``;
-* PMC 1000 x 20 on 100 x 100, 10 labels: classic against lean time in float32
-  and float64, the MAP of both (same float type) and the run's peak memory;
+* PMC 1000 x 20 on 100 x 100, 10 labels: today's code (classic kernel, NumPy
+  mixture density) against lean kernel + numba mixture density, in float32 and
+  float64, the MAP of both (same float type) and the run's peak memory;
 * ``lm_multiseed`` (50 x 50, 20 labels, 27 seeds): today's (classic kernel,
   forward-difference Jacobian) against the lean kernel with the analytic Jacobian;
 * growth of the lean kernel's ns/eval over labels (10-40) and lattice size (50²-400²).
@@ -31,6 +32,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -143,19 +145,35 @@ def ns_per_eval(target, n: int, repeat: int, kernels=("classic", "lean")) -> dic
             for k in kernels}
 
 
-def pmc_compare(shape, n_labels, dtype, n_samples, n_iter, repeat) -> dict:
-    import mrfpe
+@contextmanager
+def _today(kernel: str):
+    """``"classic"``: today's code path (classic kernel, NumPy mixture density in PMC)."""
+    import mrfpe.samplers.pmc as pmc_mod
+    from mrfpe.mixture import log_mixture_density, log_mixture_density_numpy
     from mrfpe.targets.dispatch import use_kernel
+
+    pmc_mod.log_mixture_density = (log_mixture_density_numpy if kernel == "classic"
+                                   else log_mixture_density)
+    try:
+        with use_kernel(kernel):
+            yield
+    finally:
+        pmc_mod.log_mixture_density = log_mixture_density
+
+
+def pmc_compare(shape, n_labels, dtype, n_samples, n_iter, repeat) -> dict:
+    """PMC today (classic kernel + NumPy mixture density) against lean + numba mixture."""
+    import mrfpe
 
     t = mrfpe.targets.get("pls", _scene("ward", shape, n_labels), dtype=dtype)
     out = {}
     for k in ("classic", "lean"):
-        with use_kernel(k):
+        with _today(k):
             mrfpe.sample("pmc", t, seed=0, n_samples=50, n_iterations=2)  # warm
     times = {"classic": [], "lean": []}
     for _ in range(repeat):
         for k in ("classic", "lean"):
-            with use_kernel(k), peak_memory() as mem:
+            with _today(k), peak_memory() as mem:
                 t0 = time.perf_counter()
                 post = mrfpe.sample("pmc", t, seed=0, n_samples=n_samples, n_iterations=n_iter)
                 times[k].append(time.perf_counter() - t0)
@@ -196,8 +214,11 @@ def _mib(t) -> float:
     return (t.nbytes + lean_tables(t._tables, False).nbytes) / 2**20
 
 
-def run(quick: bool = False) -> list[str]:
-    """The markdown body of the suite."""
+PARTS = ("nseval", "pmc", "lm", "growth")
+
+
+def run(quick: bool = False, parts: tuple[str, ...] = PARTS) -> list[str]:
+    """The markdown body of the suite (``parts``: which of :data:`PARTS` to run)."""
     import mrfpe
     from mrfpe.threads import configure_vector_width
 
@@ -211,7 +232,7 @@ def run(quick: bool = False) -> list[str]:
             "| lean cpu/thr | cpu ratio | SoL measured | SoL nominal | lean ÷ SoL |",
             "|---|---|---|---|---|---|---|---|---|---|---|"]
     sol = {dt: speed_of_light(dt) for dt in ("float32", "float64")}
-    for brdf in ("ward", "phong"):
+    for brdf in ("ward", "phong") if "nseval" in parts else ():
         scene = _scene(brdf, shape, 10 if quick else 20)
         for dt in ("float32", "float64"):
             t = mrfpe.targets.get("pls", scene, dtype=dt)
@@ -231,10 +252,10 @@ def run(quick: bool = False) -> list[str]:
                     f"{s['lane_ops_ns_nominal']:.1f} at {s['ghz_nominal']:.2f} GHz), "
                     f"{s['cores']} cores")
     # PMC 1000 x 20, 10 labels
-    body += ["", "| PMC | dtype | classic s | lean s | lean ÷ classic | MAP |lean − classic| "
-             "| peak RSS MiB classic / lean | traced MiB classic / lean |",
+    body += ["", "| PMC | dtype | today s | lean s | lean ÷ today | MAP |lean − today| "
+             "| peak RSS MiB today / lean | traced MiB today / lean |",
              "|---|---|---|---|---|---|---|---|"]
-    for dt in ("float32", "float64"):
+    for dt in ("float32", "float64") if "pmc" in parts else ():
         p = pmc_compare(shape, 10, dt, 200 if quick else 1000, 5 if quick else 20,
                         1 if quick else 2)
         d = float(np.max(np.abs(p["lean_map"] - p["classic_map"])))
@@ -243,6 +264,8 @@ def run(quick: bool = False) -> list[str]:
                     f" | {d:.4f} | {p['classic_rss']:.0f} / {p['lean_rss']:.0f} | "
                     f"{p['classic_traced']:.0f} / {p['lean_traced']:.0f} |")
         print(body[-1], flush=True)
+    if "lm" not in parts:
+        return body
     # lm_multiseed
     lm = lm_compare((20, 20) if quick else (50, 50), 10 if quick else 20, 4 if quick else 27, 1)
     body += ["", f"- lm_multiseed ({'20x20, 10' if quick else '50x50, 20'} labels, "
@@ -250,6 +273,8 @@ def run(quick: bool = False) -> list[str]:
              f"{lm['today_s']:.1f} s, lean + analytic Jacobian {lm['new_s']:.1f} s, ratio "
              f"{lm['new_s'] / lm['today_s']:.2f}; MAP difference {lm['map_diff']:.2e}"]
     print(body[-1], flush=True)
+    if "growth" not in parts:
+        return body
     # growth (lean, float32)
     labels = (10, 20) if quick else (10, 20, 30, 40)
     sizes = ((20, 20), (40, 40)) if quick else ((50, 50), (100, 100), (200, 200), (400, 400))
@@ -277,9 +302,10 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--quick", action="store_true")
     p.add_argument("--no-write", action="store_true")
+    p.add_argument("--parts", nargs="+", choices=PARTS, default=list(PARTS))
     args = p.parse_args(argv)
     info = machine()
-    body = run(args.quick)
+    body = run(args.quick, tuple(args.parts))
     if not args.no_write:
         append_results("bench_kernel: lean vs classic (issue 14)" + (" (quick)" if args.quick
                                                                     else ""),

@@ -42,149 +42,125 @@ def _sgn(t):
     return (t > 0) * 1.0 - (t < 0) * 1.0
 
 
+@njit(inline="always", fastmath=_FM, error_model="numpy", cache=True)
+def _sgn(t):
+    return (t > 0) * 1.0 - (t < 0) * 1.0
+
+
 @njit(parallel=True, fastmath=_FM, error_model="numpy", cache=True)
-def _grad_flat(coef, full, flat, unary, obs, inv_sigma, chunk_ptr, a, b, out_val,
-               out_grad):  # pragma: no cover - compiled
+def _grad_labels(coef, full, rec, nrec, unary, obs, inv_sigma, chunk_ptr, a, b,
+                 out_val, out_grad):  # pragma: no cover - compiled
     """Node terms ``out_val`` (n,) and ``dl/dc`` ``out_grad`` (n, 5) of one particle.
 
-    ``flat`` (:func:`_flat_tables`): the template fields of every (node, label) entry
-    in one row per field, the node's intensities and fixed triangles repeated per
-    label, so that the loop over a chunk's entries is long enough to vectorise
-    (a loop over a node's 20 labels is shorter than LLVM's vector x interleave
-    width and runs scalar). ``unary`` (n*B,) and ``inv_sigma`` in log2 units,
-    ``coef`` (5,) float64 with ``e1, e2`` times log2 e; all in float64.
+    Arguments as :func:`mrfpe.targets.lean.lean_terms_labels` (``unary`` and
+    ``inv_sigma`` in log2 units, ``coef`` (5,) float64 with ``e1, e2`` times
+    log2 e); float64 whatever the tables' precision; a node's labels are the
+    loop of a straight-line body, as in the value kernel.
     """
     n_chunks = chunk_ptr.shape[0] - 1
-    B = unary.shape[0] // max(1, obs.shape[0])
+    B = unary.shape[1]
     C0, C1, C2, E1, E2 = coef[0], coef[1], coef[2], coef[3], coef[4]
     af = float(a)
     bf = float(b)
     isg = float(inv_sigma)
     isn = -isg * _LN2  # -1 / sigma_b: derivatives in natural units
-    most = 0
-    for c in range(n_chunks):
-        most = max(most, (chunk_ptr[c + 1] - chunk_ptr[c]) * B)
     for c in prange(n_chunks):
-        e0 = chunk_ptr[c] * B
-        m_e = (chunk_ptr[c + 1] - chunk_ptr[c]) * B
-        en = np.empty(most)
-        g = np.empty((5, most))
+        en = np.empty(B)
+        g = np.empty((5, B))
         pw = np.empty(B)
-        if full:
-            for q in range(m_e):
-                e = e0 + q
-                x0 = exp2_64(E1 * flat[9, e] + E2 * flat[11, e])
-                x1 = exp2_64(E1 * flat[13, e] + E2 * flat[15, e])
-                x2 = exp2_64(E1 * flat[17, e] + E2 * flat[19, e])
-                x3 = exp2_64(E1 * flat[21, e] + E2 * flat[23, e])
-                x4 = exp2_64(E1 * flat[25, e] + E2 * flat[27, e])
-                x5 = exp2_64(E1 * flat[29, e] + E2 * flat[31, e])
-                xa = exp2_64(E1 * flat[33, e] + E2 * flat[35, e])
-                xb = exp2_64(E1 * flat[37, e] + E2 * flat[39, e])
-                s10 = flat[8, e] * x0 + flat[12, e] * x1
-                s20 = flat[10, e] * x0 + flat[14, e] * x1
-                s11 = flat[16, e] * x2 + flat[20, e] * x3
-                s21 = flat[18, e] * x2 + flat[22, e] * x3
-                s12 = flat[32, e] * xa + flat[24, e] * x4
-                s22 = flat[34, e] * xa + flat[26, e] * x4
-                s13 = flat[36, e] * xb + flat[28, e] * x5
-                s23 = flat[38, e] * xb + flat[30, e] * x5
-                q0 = (C1 * flat[8, e] + C2 * flat[10, e]) * x0
-                q1 = (C1 * flat[12, e] + C2 * flat[14, e]) * x1
-                q2 = (C1 * flat[16, e] + C2 * flat[18, e]) * x2
-                q3 = (C1 * flat[20, e] + C2 * flat[22, e]) * x3
-                q4 = (C1 * flat[24, e] + C2 * flat[26, e]) * x4
-                q5 = (C1 * flat[28, e] + C2 * flat[30, e]) * x5
-                qa = (C1 * flat[32, e] + C2 * flat[34, e]) * xa
-                qb = (C1 * flat[36, e] + C2 * flat[38, e]) * xb
-                t0 = flat[4, e] - C0 * flat[0, e] - C1 * s10 - C2 * s20
-                t1 = flat[5, e] - C0 * flat[1, e] - C1 * s11 - C2 * s21
-                t2 = flat[6, e] - C0 * flat[2, e] - C1 * s12 - C2 * s22
-                t3 = flat[7, e] - C0 * flat[3, e] - C1 * s13 - C2 * s23
-                k0 = (t0 > 0) * 1.0 - (t0 < 0) * 1.0
-                k1 = (t1 > 0) * 1.0 - (t1 < 0) * 1.0
-                k2 = (t2 > 0) * 1.0 - (t2 < 0) * 1.0
-                k3 = (t3 > 0) * 1.0 - (t3 < 0) * 1.0
-                en[q] = unary[e] + isg * (abs(t0) + abs(t1) + abs(t2) + abs(t3))
-                g[0, q] = isn * (k0 * flat[0, e] + k1 * flat[1, e] + k2 * flat[2, e]
-                                 + k3 * flat[3, e])
-                g[1, q] = isn * (k0 * s10 + k1 * s11 + k2 * s12 + k3 * s13)
-                g[2, q] = isn * (k0 * s20 + k1 * s21 + k2 * s22 + k3 * s23)
-                g[3, q] = isn * (k0 * (q0 * flat[9, e] + q1 * flat[13, e])
-                                 + k1 * (q2 * flat[17, e] + q3 * flat[21, e])
-                                 + k2 * (qa * flat[33, e] + q4 * flat[25, e])
-                                 + k3 * (qb * flat[37, e] + q5 * flat[29, e]))
-                g[4, q] = isn * (k0 * (q0 * flat[11, e] + q1 * flat[15, e])
-                                 + k1 * (q2 * flat[19, e] + q3 * flat[23, e])
-                                 + k2 * (qa * flat[35, e] + q4 * flat[27, e])
-                                 + k3 * (qb * flat[39, e] + q5 * flat[31, e]))
-        else:
-            for q in range(m_e):
-                e = e0 + q
-                p0 = flat[8, e] * exp2_64(E1 * flat[9, e])
-                p1 = flat[10, e] * exp2_64(E1 * flat[11, e])
-                p2 = flat[12, e] * exp2_64(E1 * flat[13, e])
-                p3 = flat[14, e] * exp2_64(E1 * flat[15, e])
-                p4 = flat[16, e] * exp2_64(E1 * flat[17, e])
-                p5 = flat[18, e] * exp2_64(E1 * flat[19, e])
-                pa = flat[20, e] * exp2_64(E1 * flat[21, e])
-                pb = flat[22, e] * exp2_64(E1 * flat[23, e])
-                s10 = p0 + p1
-                s11 = p2 + p3
-                s12 = pa + p4
-                s13 = pb + p5
-                t0 = flat[4, e] - C0 * flat[0, e] - C1 * s10
-                t1 = flat[5, e] - C0 * flat[1, e] - C1 * s11
-                t2 = flat[6, e] - C0 * flat[2, e] - C1 * s12
-                t3 = flat[7, e] - C0 * flat[3, e] - C1 * s13
-                k0 = (t0 > 0) * 1.0 - (t0 < 0) * 1.0
-                k1 = (t1 > 0) * 1.0 - (t1 < 0) * 1.0
-                k2 = (t2 > 0) * 1.0 - (t2 < 0) * 1.0
-                k3 = (t3 > 0) * 1.0 - (t3 < 0) * 1.0
-                en[q] = unary[e] + isg * (abs(t0) + abs(t1) + abs(t2) + abs(t3))
-                g[0, q] = isn * (k0 * flat[0, e] + k1 * flat[1, e] + k2 * flat[2, e]
-                                 + k3 * flat[3, e])
-                g[1, q] = isn * (k0 * s10 + k1 * s11 + k2 * s12 + k3 * s13)
-                g[2, q] = 0.0
-                g[3, q] = isn * C1 * (k0 * (p0 * flat[9, e] + p1 * flat[11, e])
-                                      + k1 * (p2 * flat[13, e] + p3 * flat[15, e])
-                                      + k2 * (pa * flat[21, e] + p4 * flat[17, e])
-                                      + k3 * (pb * flat[23, e] + p5 * flat[19, e]))
-                g[4, q] = 0.0
         for i in range(chunk_ptr[c], chunk_ptr[c + 1]):
-            q0 = (i - chunk_ptr[c]) * B
-            o = q0 + obs[i]
-            m = en[q0]
+            r = rec[i]
+            nr = nrec[i]
+            ui = unary[i]
+            y0, y1, y2, y3 = float(nr[0]), float(nr[1]), float(nr[2]), float(nr[3])
+            if full:
+                xa = exp2_64(E1 * nr[5] + E2 * nr[7])
+                xb = exp2_64(E1 * nr[9] + E2 * nr[11])
+                ha1, ha2, hb1, hb2 = nr[4] * xa, nr[6] * xa, nr[8] * xb, nr[10] * xb
+                qa = C1 * ha1 + C2 * ha2
+                qb = C1 * hb1 + C2 * hb2
+                wa1, wa2, wb1, wb2 = qa * nr[5], qa * nr[7], qb * nr[9], qb * nr[11]
+                for s in range(B):
+                    x0 = exp2_64(E1 * r[5, s] + E2 * r[7, s])
+                    x1 = exp2_64(E1 * r[9, s] + E2 * r[11, s])
+                    x2 = exp2_64(E1 * r[13, s] + E2 * r[15, s])
+                    x3 = exp2_64(E1 * r[17, s] + E2 * r[19, s])
+                    x4 = exp2_64(E1 * r[21, s] + E2 * r[23, s])
+                    x5 = exp2_64(E1 * r[25, s] + E2 * r[27, s])
+                    q0 = (C1 * r[4, s] + C2 * r[6, s]) * x0
+                    q1 = (C1 * r[8, s] + C2 * r[10, s]) * x1
+                    q2 = (C1 * r[12, s] + C2 * r[14, s]) * x2
+                    q3 = (C1 * r[16, s] + C2 * r[18, s]) * x3
+                    q4 = (C1 * r[20, s] + C2 * r[22, s]) * x4
+                    q5 = (C1 * r[24, s] + C2 * r[26, s]) * x5
+                    s10 = r[4, s] * x0 + r[8, s] * x1
+                    s20 = r[6, s] * x0 + r[10, s] * x1
+                    s11 = r[12, s] * x2 + r[16, s] * x3
+                    s21 = r[14, s] * x2 + r[18, s] * x3
+                    s12 = ha1 + r[20, s] * x4
+                    s22 = ha2 + r[22, s] * x4
+                    s13 = hb1 + r[24, s] * x5
+                    s23 = hb2 + r[26, s] * x5
+                    t0 = y0 - C0 * r[0, s] - C1 * s10 - C2 * s20
+                    t1 = y1 - C0 * r[1, s] - C1 * s11 - C2 * s21
+                    t2 = y2 - C0 * r[2, s] - C1 * s12 - C2 * s22
+                    t3 = y3 - C0 * r[3, s] - C1 * s13 - C2 * s23
+                    k0, k1, k2, k3 = _sgn(t0), _sgn(t1), _sgn(t2), _sgn(t3)
+                    en[s] = ui[s] + isg * (abs(t0) + abs(t1) + abs(t2) + abs(t3))
+                    g[0, s] = isn * (k0 * r[0, s] + k1 * r[1, s] + k2 * r[2, s] + k3 * r[3, s])
+                    g[1, s] = isn * (k0 * s10 + k1 * s11 + k2 * s12 + k3 * s13)
+                    g[2, s] = isn * (k0 * s20 + k1 * s21 + k2 * s22 + k3 * s23)
+                    g[3, s] = isn * (k0 * (q0 * r[5, s] + q1 * r[9, s])
+                                     + k1 * (q2 * r[13, s] + q3 * r[17, s])
+                                     + k2 * (wa1 + q4 * r[21, s]) + k3 * (wb1 + q5 * r[25, s]))
+                    g[4, s] = isn * (k0 * (q0 * r[7, s] + q1 * r[11, s])
+                                     + k1 * (q2 * r[15, s] + q3 * r[19, s])
+                                     + k2 * (wa2 + q4 * r[23, s]) + k3 * (wb2 + q5 * r[27, s]))
+            else:
+                ha = nr[4] * exp2_64(E1 * nr[5])
+                hb = nr[6] * exp2_64(E1 * nr[7])
+                wa = ha * nr[5]
+                wb = hb * nr[7]
+                for s in range(B):
+                    p0 = r[4, s] * exp2_64(E1 * r[5, s])
+                    p1 = r[6, s] * exp2_64(E1 * r[7, s])
+                    p2 = r[8, s] * exp2_64(E1 * r[9, s])
+                    p3 = r[10, s] * exp2_64(E1 * r[11, s])
+                    p4 = r[12, s] * exp2_64(E1 * r[13, s])
+                    p5 = r[14, s] * exp2_64(E1 * r[15, s])
+                    s10 = p0 + p1
+                    s11 = p2 + p3
+                    s12 = ha + p4
+                    s13 = hb + p5
+                    t0 = y0 - C0 * r[0, s] - C1 * s10
+                    t1 = y1 - C0 * r[1, s] - C1 * s11
+                    t2 = y2 - C0 * r[2, s] - C1 * s12
+                    t3 = y3 - C0 * r[3, s] - C1 * s13
+                    k0, k1, k2, k3 = _sgn(t0), _sgn(t1), _sgn(t2), _sgn(t3)
+                    en[s] = ui[s] + isg * (abs(t0) + abs(t1) + abs(t2) + abs(t3))
+                    g[0, s] = isn * (k0 * r[0, s] + k1 * r[1, s] + k2 * r[2, s] + k3 * r[3, s])
+                    g[1, s] = isn * (k0 * s10 + k1 * s11 + k2 * s12 + k3 * s13)
+                    g[2, s] = 0.0
+                    g[3, s] = isn * C1 * (k0 * (p0 * r[5, s] + p1 * r[7, s])
+                                          + k1 * (p2 * r[9, s] + p3 * r[11, s])
+                                          + k2 * (wa + p4 * r[13, s]) + k3 * (wb + p5 * r[15, s]))
+                    g[4, s] = 0.0
+            o = obs[i]
+            m = en[0]
             for s in range(1, B):
-                m = min(m, en[q0 + s])
+                m = min(m, en[s])
+            for s in range(B):
+                pw[s] = exp2_64(m - en[s])
             tot = 0.0
             for s in range(B):
-                pw[s] = exp2_64(m - en[q0 + s])
                 tot += pw[s]
             out_val[i] = _LN2 * (af * -en[o] - bf * m) + bf * np.log(tot)
             for k in range(5):
                 acc = 0.0
+                gk = g[k]
                 for s in range(B):
-                    acc += pw[s] * g[k, q0 + s]
-                out_grad[i, k] = -af * g[k, o] - bf * acc / tot
-
-
-def _flat_tables(t: Any, full: bool) -> np.ndarray:
-    """Per-(node, label) rows of every template field (float64), kept on the tables."""
-    key = "_lean_flat_full" if full else "_lean_flat"
-    if key not in t.__dict__:
-        lt = lean_tables(t, full)
-        n, _, B = lt.rec.shape
-        nf = 4 if full else 2
-        rec = lt.rec.astype(np.float64)
-        nrec = lt.nrec.astype(np.float64)
-        flat = np.empty((8 + 8 * nf, n * B))
-        flat[0:4] = rec[:, 0:4].transpose(1, 0, 2).reshape(4, -1)  # A_0..3
-        flat[4:8] = np.repeat(nrec[:, 0:4].T, B, axis=1)  # y_0..3
-        flat[8:8 + 6 * nf] = rec[:, 4:].transpose(1, 0, 2).reshape(6 * nf, -1)
-        flat[8 + 6 * nf:] = np.repeat(nrec[:, 4:].T, B, axis=1)  # fixed triangles
-        object.__setattr__(t, key, np.ascontiguousarray(flat))
-    return t.__dict__[key]
+                    acc += pw[s] * gk[s]
+                out_grad[i, k] = -af * gk[o] - bf * acc / tot
 
 
 def supports(target: Any) -> bool:
@@ -223,6 +199,7 @@ def node_terms_and_jacobian(target: Any, theta: np.ndarray) -> tuple[np.ndarray,
     model = target.model
     full = model.name not in ("lambertian", "ward")
     t = target._tables
+    lt = lean_tables(t, full)
     coef = reflectance.coefficients(model, target.to_natural(theta[None]))[0]
     ck = coef.copy()
     ck[3:] *= LOG2E
@@ -230,11 +207,10 @@ def node_terms_and_jacobian(target: Any, theta: np.ndarray) -> tuple[np.ndarray,
     val = np.empty(n)
     grad = np.empty((n, 5))
     if n:
-        with thread_budget(t.brdf_evals_per_particle * 2):
-            _grad_flat(ck, full, _flat_tables(t, full),
-                       _log2_units(target._unary_e).astype(np.float64).reshape(-1),
-                       target._obs, LOG2E / target.sigma_b, target._chunks, float(target._a),
-                       float(target._b), val, grad)
+        with thread_budget(t.brdf_evals_per_particle):  # as one residual call
+            _grad_labels(ck, full, lt.rec, lt.nrec, _log2_units(target._unary_e),
+                         target._obs, LOG2E / target.sigma_b, target._chunks,
+                         float(target._a), float(target._b), val, grad)
     jac = grad @ _coef_jacobian(model, target.to_natural, theta)
     return val + target._const, jac
 

@@ -244,17 +244,18 @@ def run(quick: bool = False, parts: tuple[str, ...] = PARTS) -> list[str]:
                         f"{s['sol_ns_eval_measured']:.3f} | {s['sol_ns_eval_nominal']:.3f} | "
                         f"{r['lean'][1] / s['sol_ns_eval_measured']:.1f} |")
             print(rows[-1], flush=True)
-    body += rows
-    body.append("")
+    if "nseval" in parts:
+        body += [*rows, ""]
     for dt, s in sol.items():
         body.append(f"- speed of light, {dt}: {s['vector_bits']}-bit vectors ({s['lanes']} lanes), "
                     f"measured {s['lane_ops_ns_measured']:.1f} FMA lane-ops/ns/core (nominal "
                     f"{s['lane_ops_ns_nominal']:.1f} at {s['ghz_nominal']:.2f} GHz), "
                     f"{s['cores']} cores")
     # PMC 1000 x 20, 10 labels
-    body += ["", "| PMC | dtype | today s | lean s | lean ÷ today | MAP |lean − today| "
-             "| peak RSS MiB today / lean | traced MiB today / lean |",
-             "|---|---|---|---|---|---|---|---|"]
+    if "pmc" in parts:
+        body += ["", "| PMC | dtype | today s | lean s | lean ÷ today | MAP |lean − today| "
+                 "| peak RSS MiB today / lean | traced MiB today / lean |",
+                 "|---|---|---|---|---|---|---|---|"]
     for dt in ("float32", "float64") if "pmc" in parts else ():
         p = pmc_compare(shape, 10, dt, 200 if quick else 1000, 5 if quick else 20,
                         1 if quick else 2)

@@ -1,4 +1,4 @@
-"""Log density of a Gaussian mixture with diagonal kernels: a leaf numeric module.
+"""Log density of a Gaussian mixture with diagonal kernels, shared by PMC and AGMMP.
 
 PMC needs the density of its jittered resampling mixture at every new particle
 (Cappé et al. 2004's deterministic-mixture weights), and AGMMP (8.3–8.5) the

@@ -102,7 +102,8 @@ def test_declared_settings_check_types_choices_and_values():
         S.resolve_config(pmc, overrides=['pmc_options={"nope": 1}'])
     with pytest.raises(ValueError, match="no surface type for lambertian"):
         S.resolve_config(pmc, overrides=['brdf=["lambertian"]'])
-    with pytest.raises(ValueError, match="setting 'target_options': pls: unknown option\(s\) 'bogus'; valid options:"):
+    with pytest.raises(ValueError, match=r"setting 'target_options': pls: unknown "
+                                         r"option\(s\) 'bogus'; valid options:"):
         S.resolve_config(pmc, overrides=['target_options={"bogus": 1}'])
     with pytest.raises(ValueError, match="setting 'runs'"):
         S.resolve_config(S.get("target_bias"), overrides=['runs={"x": {"sampler": "nope"}}'])

@@ -180,7 +180,9 @@ def log_g(lp: np.ndarray, j: int, power: float, scale: np.ndarray) -> np.ndarray
 
 def weights_literal(lg_n_prev: np.ndarray, lg_prev_prev: np.ndarray,
                     lg_anc: np.ndarray) -> np.ndarray:
-    """6.67 read literally: ``log w = log c^{n-1} + log G^n(a^{n-1})``, ``c^{n-1} = 1/G^{n-1}(a^{n-1})``.
+    """6.67 read literally: ``log w = log c^{n-1} + log G^n(a^{n-1})``.
+
+    ``c^{n-1} = 1/G^{n-1}(a^{n-1})`` (6.6.2 step 2) at the same points.
 
     Parameters
     ----------

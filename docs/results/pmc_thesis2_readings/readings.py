@@ -421,6 +421,67 @@ def cmd_summary(args) -> None:
                   f"{vc:.3g} | {vl:.3g} |")
 
 
+def _label(key) -> str:
+    reading, power, per_node, k, _n, sched, sigma_b, pw = key
+    lab = f"{reading} l={power:g}" + (" /node" if per_node else "")
+    extra = [f"k={k}"] if k != 3 else []
+    extra += [f"σ:{sched}"] if sched != "lib" else []
+    extra += [f"σ_b={sigma_b}"] if sigma_b != "auto" else []
+    extra += [f"prior_w={pw:g}"] if pw != 1.0 else []
+    return lab + (f" ({', '.join(extra)})" if extra else "")
+
+
+def tables(rows: list[dict], maps=("bsf_cand", "it_pi"), min_scenes: int = 1,
+           scenes: set | None = None) -> str:
+    """Markdown tables: MAP distance (mean ± sd over scenes) and weight variances.
+
+    Beside Table 7.1 (20 labels, Ward, PMC (II), 100 runs): the thesis's MAP
+    distance and "var" columns (``mrfpe.studies._thesis.PMC_TABLES``).
+    """
+    from mrfpe.studies._thesis import PMC_TABLES
+
+    its = [0, 4, 9, 19]
+    out = []
+    groups = group_rows([r for r in rows if scenes is None or r["scene"] in scenes])
+    for n in sorted({k[4] for k in groups}, reverse=True):
+        d_ref, v_ref = PMC_TABLES[("ward", 20, n)]
+        head = ("| setting | MAP | scenes | " + " | ".join(f"it {i + 1}" for i in its)
+                + " | fall % | MAP ≥ truth PL | time s |")
+        lines = [f"**N = {n}**, MAP distance to the truth, mean ± sd over scenes", "", head,
+                 "|" + "---|" * (len(its) + 6),
+                 "| thesis Table 7.1 | highest π | 100 | "
+                 + " | ".join(f"{d_ref[i]:.3f}" for i in its)
+                 + f" | {100 * (1 - d_ref[19] / d_ref[0]):.0f} | | |"]
+        vlines = ["", f"**N = {n}**, variance of the normalised weights × 10⁶ (mean over "
+                  "scenes): *c* = 1/G^n(a^n) (what the library records), *pin* = π with the "
+                  "PL per node, at iterations 1, 2, 5, 10, 20", "",
+                  "| setting | scenes | c: it 1 | 2 | 5 | 10 | 20 | pin: it 1 | 20 | "
+                  "π (unnormalised PL) it 20 |", "|" + "---|" * 10,
+                  "| thesis Table 7.1 | 100 | "
+                  + " | ".join(f"{v_ref[i]:.4g}" for i in (0, 1, 4, 9, 19)) + " | | | |"]
+        for key, g in sorted(groups.items(), key=lambda kv: _label(kv[0])):
+            if key[4] != n or len(g) < min_scenes:
+                continue
+            for m in maps:
+                d = np.array([r["dist"][m] for r in g])
+                mu = d.mean(0)
+                sd = d.std(0, ddof=1) if len(g) > 1 else np.zeros(d.shape[1])
+                ok = np.mean([r["final_lt"] >= r["truth_lt"] - 1e-6 for r in g])
+                wall = np.mean([r["wall_s"] for r in g])
+                lines.append(f"| {_label(key)} | {m} | {len(g)} | "
+                             + " | ".join(f"{mu[i]:.3f} ± {sd[i]:.3f}" for i in its)
+                             + f" | {100 * (1 - mu[-1] / mu[0]):.0f} | {100 * ok:.0f} % | "
+                             f"{wall:.0f} |")
+            vc = np.array([r["var"]["c"] for r in g]).mean(0) * 1e6
+            vp = np.array([r["var"]["pin"] for r in g]).mean(0) * 1e6
+            vpi = np.mean([r["var"]["pi"][-1] for r in g]) * 1e6
+            vlines.append(f"| {_label(key)} | {len(g)} | "
+                          + " | ".join(f"{vc[i]:.3g}" for i in (0, 1, 4, 9, 19))
+                          + f" | {vp[0]:.3g} | {vp[-1]:.3g} | {vpi:.3g} |")
+        out.append("\n".join(lines + vlines))
+    return "\n\n".join(out) + "\n"
+
+
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     sub = p.add_subparsers(dest="cmd", required=True)
@@ -440,11 +501,19 @@ def main(argv=None) -> None:
     s = sub.add_parser("summary")
     s.add_argument("--out", default=str(RESULTS))
     s.add_argument("--maps", default="bsf_cand")
+    t = sub.add_parser("tables", help="markdown tables (tables.md)")
+    t.add_argument("--out", default=str(RESULTS))
+    t.add_argument("--maps", default="bsf_cand,it_pi")
+    t.add_argument("--min-scenes", type=int, default=1)
+    t.add_argument("--scenes", default=None)
     args = p.parse_args(argv)
     if args.cmd == "run":
         if args.sigma_b != "auto":
             args.sigma_b = float(args.sigma_b)
         cmd_run(args)
+    elif args.cmd == "tables":
+        sc = set(_ints(args.scenes)) if args.scenes else None
+        print(tables(load(Path(args.out)), tuple(args.maps.split(",")), args.min_scenes, sc))
     else:
         cmd_summary(args)
 

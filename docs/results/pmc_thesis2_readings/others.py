@@ -36,6 +36,9 @@ SAMPLERS = {
     "dw_r_absolute": ("dw_r", {"n_steps": 20000, "initial_weight": "absolute"}),
     "dw_q_absolute": ("dw_q", {"n_steps": 20000, "initial_weight": "absolute"}),
     "dw_r_relative": ("dw_r", {"n_steps": 20000, "initial_weight": "relative"}),
+    # the literal Π₀ on the PL divided by the node count (log ϱ / |S|, via the softening)
+    "dw_r_absolute_per_node": ("dw_r", {"n_steps": 20000, "initial_weight": "absolute"}),
+    "dw_q_absolute_per_node": ("dw_q", {"n_steps": 20000, "initial_weight": "absolute"}),
 }
 
 
@@ -63,8 +66,13 @@ def main(argv: list[str]) -> None:
                 continue
             prob = prob or R.make_scene(scene)
             name, cfg = SAMPLERS[label]
+            target = prob.target
+            if label.endswith("_per_node"):
+                from mrfpe.targets.softening import softened
+
+                target = softened(target, 1.0 / target._tables.n_nodes)
             t0 = time.perf_counter()
-            post = mrfpe.sample(name, prob.target, seed=int(s_runs % 2**31), **cfg)
+            post = mrfpe.sample(name, target, seed=int(s_runs % 2**31), **cfg)
             mt = post["map_theta"].values
             d = np.linalg.norm(mt - prob.truth, axis=1)
             row = {"scene": scene, "sampler": label, "config": cfg,

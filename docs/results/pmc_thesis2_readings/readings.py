@@ -114,10 +114,26 @@ def run_seed(s_runs: int, n: int) -> int:
 
 def make_scene(repeat: int, *, sigma_b: float | str = "auto", prior_weight: float = 1.0,
                dtype: str = "float32"):
-    """The study's Ward scene ``repeat`` (100×100, smooth, 20 labels, PL_s of 7.5-7.7)."""
+    """The study's Ward scene ``repeat`` (100×100, smooth, 20 labels, PL_s of 7.5-7.7).
+
+    ``sigma_b``: "auto" (the library's default), a number, or ``"x<f>"``: ``f``
+    times the scene's automatic value.
+    """
     cfg = STUDY.config
     s_problem, _ = scene_seeds(repeat)
     opts = {"dtype": dtype}
+    if isinstance(sigma_b, str) and sigma_b.startswith("x"):
+        import dataclasses
+
+        import mrfpe
+
+        base = make_scene(repeat, prior_weight=prior_weight, dtype=dtype)
+        opts = {**opts, "sigma_b": float(sigma_b[1:]) * base.target.sigma_b}
+        if prior_weight != 1.0:
+            opts["prior_weight"] = float(prior_weight)
+        tgt = mrfpe.targets.get(cfg["target"], base.scene, **opts)
+        return dataclasses.replace(base, target=tgt,
+                                   truth_log_prob=float(tgt.log_prob(base.truth[None])[0]))
     if sigma_b != "auto":
         opts["sigma_b"] = float(sigma_b)
     if prior_weight != 1.0:
@@ -508,7 +524,7 @@ def main(argv=None) -> None:
     t.add_argument("--scenes", default=None)
     args = p.parse_args(argv)
     if args.cmd == "run":
-        if args.sigma_b != "auto":
+        if args.sigma_b != "auto" and not args.sigma_b.startswith("x"):
             args.sigma_b = float(args.sigma_b)
         cmd_run(args)
     elif args.cmd == "tables":

@@ -27,9 +27,23 @@ Variants
     weighted sd 0.67–0.77 of the truth) and ``initial="grid"`` are kept;
     ``power=<float>, kernel="isotropic"`` is the thesis's fixed softening and
     spherical ``σ_n``.
-``"thesis2"`` (PMC (II), 6.6.2, exact): the set represents the uniform
-    distribution: ``w = c^{n-1} G^n(a^{n-1})`` (6.67), resample with jitter,
-    ``c^n = 1 / G^n(a^n)``; final weights ``ePL(a) / G^{T-1}(a)``.
+``"thesis2"`` (PMC (II), 6.6.2, read as compounding): resample with
+    ``w = G^n(a^{n-1})`` — 6.67's ``c^{n-1}`` taken as the ``c̄ = 1/N`` that
+    resampleParticles returns (5.1.1 step 6) —, jitter, and keep
+    ``c^n = 1 / G^n(a^n)`` for π and the weight variance; final weights
+    ``ePL(a) / G^{T-1}(a)``; softening :data:`THESIS2_POWER` = 1e-4. The cloud's
+    density then compounds, ``≈ ∏_j G^j`` (an annealing ladder over 7.9's cycled
+    sub-lattices), which is what reproduces Table 7.1's fall of the MAP distance and
+    of the weight variances (``docs/results/pmc_thesis2_readings/report.md``, 30
+    scenes). The final weights are then not exact importance weights of the
+    posterior (the cloud is not distributed as ``G^{T-1}``): use it for the MAP;
+    ``"mixture"`` is the exact variant.
+``"thesis2_literal"`` (PMC (II), 6.6.2 as printed): ``w = c^{n-1} G^n(a^{n-1})``
+    (6.67) with ``c^{n-1} = 1/G^{n-1}(a^{n-1})`` at the same points, i.e.
+    ``G^n/G^{n-1}``: it undoes the previous selection every iteration, so the cloud
+    stays distributed as one ``G^n`` and nothing accumulates; with ``k = 1`` the
+    weight is exactly 1 (no selection at all after iteration 0). Kept for studies;
+    softening :data:`THESIS_POWER`.
 ``"thesis1"`` (PMC (I), 6.6.1, exact): the set represents the target at every
     iteration: ``v = π^{n-1} G^n(θ^{n-1}) / ePL(θ^{n-1})`` (6.66), resample with
     jitter, ``π^n = ePL(θ^n) / G^n(θ^n)``, resample (full-target evaluations
@@ -62,6 +76,7 @@ import xarray as xr
 from mrfpe.samplers.base import Callback, Sampler, check_choice, check_positive_int, check_range
 from mrfpe.samplers.kit import (
     RESAMPLING_METHODS,
+    THESIS2_POWER,
     THESIS_POWER,
     History,
     Run,
@@ -84,7 +99,7 @@ from mrfpe.samplers.kit import (
 )
 
 __all__ = ["PMC", "THESIS_POWER", "Context", "PMCState", "final_log_weight", "init_state",
-           "mixture_step", "thesis1_step", "thesis2_step"]
+           "mixture_step", "thesis1_step", "thesis2_literal_step", "thesis2_step"]
 
 
 class Context(NamedTuple):
@@ -162,21 +177,31 @@ def mixture_step(pmc: PMC, ctx: Context, state: PMCState, n: int,
 
 
 def thesis2_step(cfg: Any, ctx: Context, state: PMCState, n: int,
-                 g: Any) -> tuple[PMCState, np.ndarray]:
-    """PMC (II), 6.6.2: ``w = c^{n-1} G^n(a^{n-1})`` (6.67), resample with jitter,
-    ``c^n = 1 / G^n(a^n)``; the set keeps representing the uniform distribution.
+                 g: Any, *, literal: bool = False) -> tuple[PMCState, np.ndarray]:
+    """PMC (II), 6.6.2: resample with ``w = c^{n-1} G^n(a^{n-1})`` (6.67), jitter,
+    ``c^n = 1 / G^n(a^n)``.
 
+    ``literal=False`` (variant ``"thesis2"``) takes ``c^{n-1}`` as the ``1/N`` that
+    resampling returns, so ``w = G^n(a^{n-1})`` and the selections compound;
+    ``literal=True`` (``"thesis2_literal"``) as ``1/G^{n-1}(a^{n-1})``, so the set
+    keeps representing the uniform distribution (and ``k = 1`` gives ``w = 1``).
     ``cfg`` provides ``n_samples``, ``resampling`` and ``sigma(n)`` (PMC and PPF do).
     """
     run, x = ctx.run, state.x
     w = run.evaluate(g, x)  # u^0 grid weighted by G^0 (6.6.2, n = 0, step 1)
-    if n > 0:
-        w = state.log_weight + w  # 6.67
+    if n > 0 and literal:
+        w = state.log_weight + w  # 6.67 with c^{n-1} = 1/G^{n-1}(a^{n-1})
     idx = resample(w, cfg.n_samples, cfg.resampling, ctx.rng)
     a = jitter(x[idx], cfg.sigma(n), ctx.bounds, ctx.rng)
     lg = run.evaluate(g, a)
     lc = log_ratio(0.0, lg)  # c^n = 1/G^n(a^n), zero where G^n = 0
     return state._replace(x=a, log_weight=lc, log_den=lg), lg
+
+
+def thesis2_literal_step(cfg: Any, ctx: Context, state: PMCState, n: int,
+                         g: Any) -> tuple[PMCState, np.ndarray]:
+    """PMC (II) with 6.67 read literally (:func:`thesis2_step` with ``literal=True``)."""
+    return thesis2_step(cfg, ctx, state, n, g, literal=True)
 
 
 def thesis1_step(cfg: Any, ctx: Context, state: PMCState, n: int,
@@ -202,7 +227,7 @@ def thesis1_step(cfg: Any, ctx: Context, state: PMCState, n: int,
 
 
 STEPS: dict[str, Step] = {"mixture": mixture_step, "thesis2": thesis2_step,
-                          "thesis1": thesis1_step}
+                          "thesis2_literal": thesis2_literal_step, "thesis1": thesis1_step}
 
 
 class PMC(Sampler):
@@ -210,7 +235,7 @@ class PMC(Sampler):
 
     Configuration (the thesis's settings, 6.6 and 7.4, where it gives them):
     ``n_samples`` = 1000 particles, ``n_iterations`` = 20, ``variant`` ("mixture",
-    "thesis2", "thesis1"), ``k`` = 3 sub-lattices of kind ``partition`` cycled as
+    "thesis2", "thesis2_literal", "thesis1"), ``k`` = 3 sub-lattices of kind ``partition`` cycled as
     importance functions (7.9), softening ``power`` (5.69–5.72), ``sigma0`` = 0.07
     initial jitter decreasing linearly to 0, ``kernel`` shape, ``resampling``
     scheme (see :mod:`mrfpe.resampling`),
@@ -223,7 +248,8 @@ class PMC(Sampler):
     ``kernel="covariance"`` (the cloud's weighted covariance), ``initial="halton"``
     and systematic
     resampling (less drift, so a second mode survives to the final reweighting);
-    for the thesis variants the fixed :data:`THESIS_POWER`, the spherical ``σ_n``,
+    for the thesis variants a fixed power (:data:`THESIS2_POWER` for "thesis2",
+    :data:`THESIS_POWER` for the others), the spherical ``σ_n``,
     the grid and multinomial resampling exactly as 6.6. The thesis gives no softening
     power, and on a 100x100 PL the spherical kernel cannot follow a target
     that is ~100x sharper in one parameter than along a ridge in the others:
@@ -242,11 +268,11 @@ class PMC(Sampler):
                  keep_history: bool = False):
         self.n_samples = check_positive_int("n_samples", n_samples, 2)
         self.n_iterations = check_positive_int("n_iterations", n_iterations, 1)
-        self.variant = check_choice("variant", variant, ("mixture", "thesis2", "thesis1"))
+        self.variant = check_choice("variant", variant, tuple(STEPS))
         self.k = check_positive_int("k", k, 1)
         self.partition = check_choice("partition", partition, ("strided", "block"))
         if power is None:  # the variant's default (see the class docstring)
-            power = "auto" if variant == "mixture" else THESIS_POWER
+            power = {"mixture": "auto", "thesis2": THESIS2_POWER}.get(variant, THESIS_POWER)
         if isinstance(power, str):
             check_choice("power", power, ("auto",))
             if variant != "mixture":

@@ -13,7 +13,7 @@ The importance functions are the target's sub-lattice targets when it offers
 ``partition`` (``P`` partitions, 5.67 blocks / 5.68 strided), softened with
 power ``l`` (5.69–5.72); otherwise ``P`` stages of the softened full target.
 Over one time step this is PMC (II) with ``P`` iterations (thesis 5.6):
-``PPF(n_partitions=P, k=P)`` and ``PMC(variant="thesis2", n_iterations=P, k=P)``
+``PPF(n_partitions=P, k=P)`` and ``PMC(variant="thesis2_literal", n_iterations=P, k=P)``
 give the same numbers, which the tests check.
 
 Weights (``weights``): ``"thesis"`` is the above, bit-for-bit (with the thesis's
@@ -59,7 +59,7 @@ from mrfpe.samplers.pmc import (
     final_log_weight,
     init_state,
     mixture_step,
-    thesis2_step,
+    thesis2_literal_step,
 )
 
 __all__ = ["PPF"]
@@ -116,7 +116,7 @@ class PPF(Sampler):
         parts = partition_or_none(target, self.k, self.partition) or [target]
         if self.weights == "thesis":
             # 5.33 (π ← π g^n), resample with noise, 5.34 (π ← π / g^n): PMC (II)'s step
-            G, cfg, step = [softened(p, self.power) for p in parts], self, thesis2_step
+            G, cfg, step = [softened(p, self.power) for p in parts], self, thesis2_literal_step
         else:  # the jitter accounted for: PMC's deterministic-mixture step (thesis 5.6)
             G, cfg, step = parts, self._mixture_config(), mixture_step
         run = Run(target, P, progress=progress, callback=callback, desc="ppf")

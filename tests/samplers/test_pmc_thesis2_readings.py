@@ -75,23 +75,45 @@ def test_compound_weight_is_the_importance_function(readings, target):
     assert all(np.ptp(lw[np.isfinite(lw)]) > 0 for lw in lws)
 
 
-def test_library_thesis2_k1_resamples_with_equal_weights(target, monkeypatch):
-    """Today's ``PMC(variant="thesis2")`` (the literal reading) with k = 1: every
-    resampling after the first sees exactly equal weights."""
+def _resampling_weights(target, monkeypatch, **config):
+    """The log weights every resampling of one PMC run sees."""
     pmc = pytest.importorskip("mrfpe.samplers.pmc")
-    if not hasattr(pmc, "_resample") or not hasattr(pmc.PMC, "_thesis2_step"):
-        pytest.skip("pmc.py restructured: port this check to variant='thesis2_literal'")
     seen = []
-    real = pmc._resample
+    real = pmc.resample
 
     def spy(lw, *args, **kwargs):
         seen.append(np.asarray(lw, dtype=np.float64).copy())
         return real(lw, *args, **kwargs)
 
-    monkeypatch.setattr(pmc, "_resample", spy)
-    mrfpe.sample("pmc", target, seed=1, n_samples=64, n_iterations=5, variant="thesis2", k=1,
-                 power=0.3)
+    monkeypatch.setattr(pmc, "resample", spy)
+    mrfpe.sample("pmc", target, seed=1, n_samples=64, n_iterations=5, power=0.3, **config)
+    return seen
+
+
+def test_library_thesis2_literal_k1_resamples_with_equal_weights(target, monkeypatch):
+    """``PMC(variant="thesis2_literal", k=1)``: every resampling after the first sees
+    exactly equal weights, ``log w = -log G(a) + log G(a) = 0`` (no selection)."""
+    seen = _resampling_weights(target, monkeypatch, variant="thesis2_literal", k=1)
     assert len(seen) == 5
     assert np.ptp(seen[0]) > 0  # iteration 0 weights the grid by G^0
     for lw in seen[1:]:
         assert np.all(lw == 0.0)
+
+
+def test_library_thesis2_compounds_with_one_sublattice(target, monkeypatch):
+    """``PMC(variant="thesis2", k=1)`` (the compounding reading) keeps selecting: each
+    resampling weight is ``G(a^{n-1})`` itself, so it is not constant."""
+    seen = _resampling_weights(target, monkeypatch, variant="thesis2", k=1)
+    assert len(seen) == 5
+    for lw in seen:
+        assert np.ptp(lw[np.isfinite(lw)]) > 0
+
+
+def test_library_thesis2_matches_the_script(readings, target, monkeypatch):
+    """The ported step and the experiment's ``weights_compound`` give the same weights:
+    at every iteration n >= 1 the library resamples with ``log G^n`` at the current set."""
+    seen = _resampling_weights(target, monkeypatch, variant="thesis2", k=3)
+    lit = _resampling_weights(target, monkeypatch, variant="thesis2_literal", k=3)
+    np.testing.assert_array_equal(seen[0], lit[0])  # iteration 0: the same grid, same G^0
+    for lw in seen[1:]:
+        np.testing.assert_array_equal(lw, readings.weights_compound(lw, None, None))

@@ -5,7 +5,7 @@ This script is standalone (it does not touch ``mrfpe/``): it rebuilds the
 ``pmc_convergence`` study's synthetic Ward scenes (same seeds as the committed
 run in ``docs/results/pmc_convergence_ward20``) and runs each reading of the
 resampling weight ``w`` with the same pieces ``PMC._thesis2_step`` uses
-(:func:`mrfpe.samplers._common.grid`, :func:`~mrfpe.samplers._common.jitter`,
+(:func:`mrfpe.samplers.kit.grid`, :func:`~mrfpe.samplers.kit.jitter`,
 :func:`mrfpe.resampling.resample`, the target's ``partition(k, "strided")`` and
 the softening ``log G^j = l * log ePL_s^j`` of 5.69-5.72).
 
@@ -71,9 +71,9 @@ from pathlib import Path
 import numpy as np
 
 from mrfpe.resampling import resample
-from mrfpe.samplers._common import grid, jitter, log_ratio
-from mrfpe.studies._synthetic import child_seeds, make_problem
+from mrfpe.samplers.kit import grid, jitter, log_ratio
 from mrfpe.studies.pmc_convergence import STUDY
+from mrfpe.studies.synthetic import child_seeds, make_problem
 from mrfpe.study import trial_seed
 
 HERE = Path(__file__).resolve().parent

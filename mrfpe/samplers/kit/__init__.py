@@ -50,7 +50,8 @@ Jitter kernels
     :func:`jitter_mixture` (jitter and the mixture density in one call).
 
 Importance functions
-    :func:`partition_or_none`, :func:`softened`, :data:`THESIS_POWER`.
+    :func:`partition_or_none`, :func:`softened`, :data:`THESIS_POWER`,
+    :data:`THESIS2_POWER`.
 Weights and resampling
     :func:`resample`, :data:`RESAMPLING_METHODS`, :func:`ess`,
     :func:`normalise_log_weights`, :func:`log_ratio`, :func:`perplexity`.
@@ -64,7 +65,7 @@ from mrfpe.resampling import ess, log_ratio, normalise_log_weights, perplexity, 
 from mrfpe.samplers.kit.chains import KeptStates, check_chain_length
 from mrfpe.samplers.kit.draws import draw_in_support, grid, space_filling
 from mrfpe.samplers.kit.history import History
-from mrfpe.samplers.kit.importance import THESIS_POWER, partition_or_none, softened
+from mrfpe.samplers.kit.importance import THESIS2_POWER, THESIS_POWER, partition_or_none, softened
 from mrfpe.samplers.kit.jitter import (
     covariance_kernel,
     jitter,
@@ -86,6 +87,7 @@ from mrfpe.validation import (
 
 __all__ = [
     "RESAMPLING_METHODS",
+    "THESIS2_POWER",
     "THESIS_POWER",
     "History",
     "KeptStates",

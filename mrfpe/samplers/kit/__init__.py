@@ -49,6 +49,10 @@ Jitter kernels
     :func:`covariance_kernel` (a kernel shaped like the weighted cloud) and
     :func:`jitter_mixture` (jitter and the mixture density in one call).
 
+Evidence
+    :func:`box_log_evidence` (``log_evidence`` relative to the box, the convention of
+    every importance sampler), :func:`log_box_volume`, :func:`log_mixture_box_mass`
+    (the box mass of an untruncated covariance mixture), :data:`MASS_DRAWS`.
 Importance functions
     :func:`partition_or_none`, :func:`softened`, :data:`THESIS_POWER`.
 Weights and resampling
@@ -63,6 +67,12 @@ from mrfpe.resampling import METHODS as RESAMPLING_METHODS
 from mrfpe.resampling import ess, log_ratio, normalise_log_weights, perplexity, resample
 from mrfpe.samplers.kit.chains import KeptStates, check_chain_length
 from mrfpe.samplers.kit.draws import draw_in_support, grid, space_filling
+from mrfpe.samplers.kit.evidence import (
+    MASS_DRAWS,
+    box_log_evidence,
+    log_box_volume,
+    log_mixture_box_mass,
+)
 from mrfpe.samplers.kit.history import History
 from mrfpe.samplers.kit.importance import THESIS_POWER, partition_or_none, softened
 from mrfpe.samplers.kit.jitter import (
@@ -85,11 +95,13 @@ from mrfpe.validation import (
 )
 
 __all__ = [
+    "MASS_DRAWS",
     "RESAMPLING_METHODS",
     "THESIS_POWER",
     "History",
     "KeptStates",
     "Run",
+    "box_log_evidence",
     "check_bool",
     "check_chain_length",
     "check_choice",
@@ -104,7 +116,9 @@ __all__ = [
     "jitter",
     "jitter_mixture",
     "jitter_resampled",
+    "log_box_volume",
     "log_kernel_mass",
+    "log_mixture_box_mass",
     "log_mixture_density",
     "log_mixture_density_chol",
     "log_ratio",

@@ -44,7 +44,7 @@ import xarray as xr
 from mrfpe.resampling import check_log_weights, ess, normalise_log_weights
 
 __all__ = ["ATTRS", "ESS_MIN", "KINDS", "PARETO_K_MAX", "RHAT_MAX", "PosteriorWarning",
-           "chain_layout", "diagnose", "diagnostics_attrs", "pareto_k_threshold"]
+           "chain_ess", "chain_layout", "diagnose", "diagnostics_attrs", "pareto_k_threshold"]
 
 #: Smallest effective sample size a posterior's estimates are trusted at.
 ESS_MIN = 100.0
@@ -93,22 +93,36 @@ def chain_layout(post: xr.Dataset) -> tuple[np.ndarray, np.ndarray]:
     return order.reshape(chains.size, counts[0]), chains
 
 
-def _chain_stats(theta: np.ndarray, layout: np.ndarray) -> tuple[float, float]:
-    """(worst bulk/tail ESS over parameters, worst R̂ or NaN for one chain) from ArviZ."""
+def chain_ess(x: np.ndarray) -> float:
+    """ArviZ's rank-normalised bulk and tail ESS of chains ``x`` (chain, draw, param),
+    pooled over the chains: the smaller of the two for the worst parameter (0 where
+    ArviZ gives no finite value). What :func:`diagnose` reports as ``ess_chain``, and
+    what the MCMC samplers' ``ess`` trace holds at its checkpoints."""
     import arviz as az
 
-    x = theta[layout]  # (chain, draw, param)
-    ess_min, rhat_max = math.inf, -math.inf
+    ess_min = math.inf
     with warnings.catch_warnings():  # ArviZ warns on short or constant chains; we report
         warnings.simplefilter("ignore")
         for j in range(x.shape[2]):
             xj = x[:, :, j]
             e = min(float(az.ess(xj, method="bulk")), float(az.ess(xj, method="tail")))
             ess_min = min(ess_min, e if np.isfinite(e) else 0.0)
-            if x.shape[0] >= 2:
-                r = float(az.rhat(xj))
+    return ess_min
+
+
+def _chain_stats(theta: np.ndarray, layout: np.ndarray) -> tuple[float, float]:
+    """(worst bulk/tail ESS over parameters, worst R̂ or NaN for one chain) from ArviZ."""
+    import arviz as az
+
+    x = theta[layout]  # (chain, draw, param)
+    rhat_max = -math.inf
+    if x.shape[0] >= 2:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            for j in range(x.shape[2]):
+                r = float(az.rhat(x[:, :, j]))
                 rhat_max = max(rhat_max, r if np.isfinite(r) else math.inf)
-    return ess_min, (rhat_max if x.shape[0] >= 2 else math.nan)
+    return chain_ess(x), (rhat_max if x.shape[0] >= 2 else math.nan)
 
 
 def _pareto_k(log_w: np.ndarray, reff: float) -> float:

@@ -92,7 +92,7 @@ class EmceeEnsemble(Sampler):
             prev = x.copy()
             run.offer(x, lp)
             kept.record(t, x, lp)
-            run.step(t, np.nan, acceptance=float(acceptance[t]))
+            run.step(t, kept.trace_ess(t), acceptance=float(acceptance[t]))
         try:
             tau = emcee.autocorr.integrated_time(kept.theta, tol=0)  # tol=0: no length warning
         except Exception:  # a chain too short to estimate it

@@ -32,7 +32,9 @@ Run log
     :func:`mrfpe.posterior.build` keyword: the diagnostics hook).
 Records
     :class:`History` (every step's weighted set, for ``keep_history``),
-    :class:`KeptStates` (an MCMC run's post-burn-in, thinned states).
+    :class:`KeptStates` (an MCMC run's post-burn-in, thinned states; its
+    :meth:`~KeptStates.trace_ess` is the ``ess`` trace entry: ArviZ's chain ESS at
+    :data:`ESS_CHECKPOINTS` evenly spaced kept steps, NaN elsewhere).
 Validators
     :func:`check_target`, :func:`check_seed`, :func:`check_positive_int`,
     :func:`check_range`, :func:`check_choice`, :func:`check_bool`,
@@ -65,7 +67,7 @@ from __future__ import annotations
 from mrfpe.mixture import log_mixture_density
 from mrfpe.resampling import METHODS as RESAMPLING_METHODS
 from mrfpe.resampling import ess, log_ratio, normalise_log_weights, perplexity, resample
-from mrfpe.samplers.kit.chains import KeptStates, check_chain_length
+from mrfpe.samplers.kit.chains import ESS_CHECKPOINTS, KeptStates, check_chain_length
 from mrfpe.samplers.kit.draws import draw_in_support, grid, space_filling
 from mrfpe.samplers.kit.evidence import (
     MASS_DRAWS,
@@ -95,6 +97,7 @@ from mrfpe.validation import (
 )
 
 __all__ = [
+    "ESS_CHECKPOINTS",
     "MASS_DRAWS",
     "RESAMPLING_METHODS",
     "THESIS_POWER",

@@ -107,9 +107,9 @@ def build(
         the ESS and R̂ then come from the chains (:func:`mrfpe.posterior.diagnose`).
     kind : ``"draws"`` (a sample of the posterior) or ``"optima"`` (the optima of a
         multi-start optimiser: diagnosed as not a posterior sample, not warned about).
-    log_evidence, log_evidence_se : the importance-sampling estimate of the
-        target's normaliser and its standard error
-        (:func:`mrfpe.resampling.log_evidence`), stored as attributes if given.
+    log_evidence, log_evidence_se : the estimate of the target's log normaliser
+        relative to the box, ``log(∫_box p / vol(box))``, and its standard error
+        (:func:`mrfpe.samplers.kit.box_log_evidence`), stored as attributes if given.
     sampler : the sampler's registered name.
     target : the target object (its ``describe()`` is stored) or a dict.
     extra_vars : further ``{name: (dims, values)}`` variables (e.g. ``acceptance``).

@@ -192,7 +192,6 @@ class _DynamicWeighting(Sampler):
         log_pi = self._initial_log_weight(lp)
         acceptance = np.zeros(n)
         kept = KeptStates(n, self.burn_in, self.thin, c, d, weighted=True)
-        lse1 = lse2 = -np.inf  # running logsumexp of the kept log w and 2 log w (Kish ESS)
         for t in range(n):
             y = x + sd * rng.standard_normal((c, d))
             inside = np.all((y >= lo) & (y <= hi), axis=1)
@@ -211,11 +210,9 @@ class _DynamicWeighting(Sampler):
             x[accept], lp[accept] = y[accept], lpy[accept]
             acceptance[t] = accept.mean()
             run.offer(x, lp)
-            if kept.record(t, x, lp, log_pi):
-                lse1 = np.logaddexp(lse1, np.logaddexp.reduce(log_pi))
-                lse2 = np.logaddexp(lse2, np.logaddexp.reduce(2 * log_pi))
-            ess = np.exp(2 * lse1 - lse2) if np.isfinite(lse1) else np.nan
-            run.step(t, ess, acceptance=float(acceptance[t]),
+            kept.record(t, x, lp, log_pi)
+            # chain ESS x Kish efficiency of the raw kept weights at checkpoints, NaN elsewhere
+            run.step(t, kept.trace_ess(t), acceptance=float(acceptance[t]),
                      max_log_weight=float(np.max(log_pi)))
         theta, log_target, lw = kept.flat()
         if self.weights == "stratified":  # the estimator the method's authors use

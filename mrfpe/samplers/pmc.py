@@ -60,6 +60,14 @@ then follow the untruncated mixture restricted to the box, whose normaliser is
 one global constant that self-normalisation removes. Particles where ``G^n`` is
 zero get zero weight in the thesis variants (``1/G`` is undefined there).
 
+Evidence: the mixture variant's final weights ``ϱ/q^{T-1}`` are importance weights
+of a normalised proposal, so its posteriors carry ``log_evidence`` and
+``log_evidence_se``, relative to the box (:mod:`mrfpe.samplers.kit.evidence`;
+with ``kernel="covariance"`` the box mass of the untruncated mixture is
+estimated from extra draws after the run). The thesis variants divide by an
+unnormalised ``G^{T-1}`` that their draws only approximately follow: no
+normaliser is defined and none is reported.
+
 The MAP trace is best-so-far under the *full* target: each iteration
 evaluates the full target at its best particle under ``G^n`` (one evaluation,
 1/N per particle), and the last step offers every finally reweighted particle.
@@ -80,6 +88,7 @@ from mrfpe.samplers.kit import (
     THESIS_POWER,
     History,
     Run,
+    box_log_evidence,
     check_bool,
     check_seed,
     check_target,
@@ -88,7 +97,9 @@ from mrfpe.samplers.kit import (
     grid,
     jitter,
     jitter_mixture,
+    log_box_volume,
     log_kernel_mass,
+    log_mixture_box_mass,
     log_mixture_density,
     log_ratio,
     normalise_log_weights,
@@ -99,7 +110,8 @@ from mrfpe.samplers.kit import (
 )
 
 __all__ = ["PMC", "THESIS_POWER", "Context", "PMCState", "final_log_weight", "init_state",
-           "mixture_step", "thesis1_step", "thesis2_literal_step", "thesis2_step"]
+           "mixture_log_evidence", "mixture_step", "thesis1_step", "thesis2_literal_step",
+           "thesis2_step"]
 
 
 class Context(NamedTuple):
@@ -124,6 +136,8 @@ class PMCState(NamedTuple):
     resampled : whether this iteration resampled (mixture with ``ess_threshold``).
     log_target : full target at ``x`` when the step evaluated it (PMC (I)), else None.
     x_next, log_target_next : PMC (I)'s step-3 resampled set, the next iteration's input.
+    mixture : mixture with ``kernel="covariance"``: ``(centres, log_w, chol)`` of the
+        untruncated mixture ``log_den`` is the density of (for its box mass, the evidence).
     """
 
     x: np.ndarray
@@ -134,6 +148,7 @@ class PMCState(NamedTuple):
     log_target: np.ndarray | None = None
     x_next: np.ndarray | None = None
     log_target_next: np.ndarray | None = None
+    mixture: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
 
 def init_state(x: np.ndarray, power: float | str) -> PMCState:
@@ -144,6 +159,27 @@ def init_state(x: np.ndarray, power: float | str) -> PMCState:
 def final_log_weight(state: PMCState, log_target: np.ndarray) -> np.ndarray:
     """The final reweighting with the full target: ``log ϱ(x) − log_den``."""
     return log_target if state.log_den is None else log_ratio(log_target, state.log_den)
+
+
+def mixture_log_evidence(state: PMCState, log_weight: np.ndarray, bounds: np.ndarray,
+                         rng: np.random.Generator) -> dict[str, float]:
+    """``{"log_evidence": …, "log_evidence_se": …}`` (relative to the box,
+    :mod:`mrfpe.samplers.kit.evidence`) of the mixture variant's final weights
+    ``ϱ(x)/q(x)``; empty when every weight is zero (``build`` refuses the set).
+
+    ``q`` is the last jittered resample's density: exact on the box for the
+    diagonal kernels, the untruncated mixture for ``kernel="covariance"`` (its box
+    mass is estimated with ``rng``, after the run, so the draws are unchanged); with
+    a single iteration the weights are ``ϱ`` itself on the uniform start.
+    """
+    if not np.isfinite(log_weight).any():
+        return {}
+    log_vol = log_box_volume(bounds)
+    lw = log_weight + log_vol if state.log_den is None else log_weight  # U(box): q = 1/vol
+    mass, mass_se = (0.0, 0.0) if state.mixture is None else log_mixture_box_mass(
+        *state.mixture, bounds, rng)
+    lz, se = box_log_evidence(lw, bounds, mass, mass_se)
+    return {"log_evidence": lz, "log_evidence_se": se}
 
 
 # Each step maps (config, context, state, iteration n, importance function G^n) to the new
@@ -163,8 +199,12 @@ def mixture_step(pmc: PMC, ctx: Context, state: PMCState, n: int,
     ok = pmc.ess_threshold is None or ess(lw_prev) < pmc.ess_threshold * lw_prev.size
     idx = (resample(lw_prev, pmc.n_samples, pmc.resampling, ctx.rng) if ok
            else np.arange(x.shape[0]))
+    mixture = None
     if pmc.kernel == "covariance":  # full kernel, out-of-box draws take a fresh ancestor
-        x_new, lq = jitter_mixture(x, idx, covariance_kernel(x, lw_prev), ctx.bounds, ctx.rng)
+        chol = covariance_kernel(x, lw_prev)
+        x_new, lq = jitter_mixture(x, idx, chol, ctx.bounds, ctx.rng)
+        anc, counts = np.unique(idx, return_counts=True)
+        mixture = (x[anc], np.log(counts / idx.size), chol)
     else:  # diagonal kernels truncated to the box, with their exact normalisers
         anc, counts = np.unique(idx, return_counts=True)
         sigma = pmc._kernel(n, x, lw_prev)
@@ -173,7 +213,8 @@ def mixture_step(pmc: PMC, ctx: Context, state: PMCState, n: int,
         lq = log_mixture_density(x_new, x[anc], log_w, sigma)
     raw = run.evaluate(g, x_new)
     power, lw = pmc._soften(raw, lq, state.power)
-    return PMCState(x=x_new, log_weight=lw, log_den=lq, power=power, resampled=bool(ok)), raw
+    return PMCState(x=x_new, log_weight=lw, log_den=lq, power=power, resampled=bool(ok),
+                    mixture=mixture), raw
 
 
 def thesis2_step(cfg: Any, ctx: Context, state: PMCState, n: int,
@@ -381,5 +422,9 @@ class PMC(Sampler):
             history.record(state.x, lw)
             run.step(n, ess(lw), sigma=self.sigma(n), resampled=state.resampled,
                      power=state.power)
+        # the thesis variants' final weights ϱ/G divide by an unnormalised G^{T-1} whose
+        # draws only approximately follow it: no normaliser is defined, none reported
+        ev = (mixture_log_evidence(state, lw, bounds, ctx.rng) if self.variant == "mixture"
+              else {})
         return run.finish(state.x, lt, lw, sampler=self.name, config=self.get_config(),
-                          seed=seed, **history.build_kwargs())
+                          seed=seed, **ev, **history.build_kwargs())

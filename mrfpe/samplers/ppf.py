@@ -24,7 +24,8 @@ accounts for the jitter: by 5.6 PPF over one time step is PMC, so each partition
 runs PMC's deterministic-mixture step (:func:`mrfpe.samplers.pmc.mixture_step`:
 weights ``g^n(x)^l / q^n(x)`` with ``q^n`` the jittered resample's density, a kernel
 following the cloud's covariance, the power annealed, ``power="auto"``) from the
-same grid, and the final weights are ``ϱ(x) / q(x)``.
+same grid, and the final weights are ``ϱ(x) / q(x)``; they give ``log_evidence`` and
+``log_evidence_se`` as PMC's do (:func:`mrfpe.samplers.pmc.mixture_log_evidence`).
 
 ``σ_n = σ₀ (1 − n/P)``; a jittered particle that leaves the bounds is redrawn
 from the same kernel. Particles where ``g^n`` vanishes get zero weight. The MAP
@@ -58,6 +59,7 @@ from mrfpe.samplers.pmc import (
     Context,
     final_log_weight,
     init_state,
+    mixture_log_evidence,
     mixture_step,
     thesis2_literal_step,
 )
@@ -134,5 +136,8 @@ class PPF(Sampler):
                 run.offer_candidate(state.x, lg)
             history.record(state.x, lw)
             run.step(n, ess(lw), sigma=self.sigma(n))
+        # mixture weights are importance weights (PMC's evidence); the thesis's 1/g^n are not
+        ev = (mixture_log_evidence(state, lw, bounds, ctx.rng) if self.weights == "mixture"
+              else {})
         return run.finish(state.x, lt, lw, sampler=self.name, config=self.get_config(),
-                          seed=seed, **history.build_kwargs())
+                          seed=seed, **ev, **history.build_kwargs())

@@ -25,7 +25,7 @@ Three published diagnostics, each computed by a well-known library:
     ``τ / (2 n)`` for walkers of ``n`` draws and autocorrelation time ``τ`` even when
     the ensemble is stationary — ``R̂ ≤ 1.01`` demands an ESS of ~100 *per walker*
     (3200 for 32 walkers), while the estimates use all walkers together. Measured on
-    the 3-D Gaussian of ``tests/samplers/accuracy_table.py``: R̂ across walkers
+    the 3-D Gaussian of ``benchmarks/bench_accuracy.py``: R̂ across walkers
     1.08–1.12 with means within 0.08 sd and sds within 4 %. For ensembles the
     ``rhat`` is therefore the *nested* R̂ of Margossian et al. (2024), made for
     many short chains: the walkers are grouped into :data:`ENSEMBLE_SUPERCHAINS`

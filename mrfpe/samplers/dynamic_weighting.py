@@ -48,7 +48,7 @@ is the estimator the method's authors use for expectations, stratified truncatio
 :func:`stratified_truncation` with ``n_strata`` strata of log ϱ and truncation
 at the ``truncation`` quantile within each; ``"raw"`` is ``log_weight`` = log Π_i
 as before. Measured on a 3-D Gaussian at the default budget
-(tests/samplers/accuracy_table.py, 3 seeds) neither is accurate — R-type mean
+(benchmarks/bench_accuracy.py, 3 seeds) neither is accurate — R-type mean
 error ~0.35 sd, Q-type 2 sd — because one 20000-step chain's weights are
 dominated by a few excursions; truncation raises the Kish ESS (R: ~18 → ~50,
 Q: ~5 → ~28) but not enough. Treat these posteriors as unreliable unless

@@ -21,7 +21,7 @@ Variants
     start is a scrambled Halton design (``initial="halton"``; a tensor grid in
     10-D is the 2¹⁰ corners of {0.25, 0.75}¹⁰) and the kernel follows the cloud's
     weighted covariance (``kernel="covariance"``, :func:`~mrfpe.samplers.kit.covariance_kernel`):
-    extensions beyond the thesis, measured in ``tests/samplers/accuracy_table.py``
+    extensions beyond the thesis, measured in ``benchmarks/bench_accuracy.py``
     and ``benchmarks/bench_pmc.py``. ``kernel="adaptive"`` (diagonal
     ``min(σ_n, h·sd_j)``, the default until issue 12: too narrow once σ_n → 0,
     weighted sd 0.67–0.77 of the truth) and ``initial="grid"`` are kept;

@@ -58,8 +58,8 @@ def _sample(name, target, seed=0, **cfg):
         return mrfpe.sample(name, target, seed=seed, **cfg)
 
 
-#: A correlated Gaussian well inside the cube (the 3-D one of accuracy_table.py), scaled by
-#: e^-40 so the normaliser is not trivially 0.
+#: A correlated Gaussian well inside the cube (the 3-D one of benchmarks/bench_accuracy.py),
+#: scaled by e^-40 so the normaliser is not trivially 0.
 class Correlated3D(Target):
     param_names = ("a", "b", "c")
     bounds = np.array([[0.0, 1.0]] * 3)

@@ -1,10 +1,11 @@
 """Accuracy of every sampler's *default* configuration on Gaussians in the unit cube.
 
-Not collected by pytest (no ``test_`` prefix): a measurement script for issue 12.
+A measurement script for issue 12 (run from the repository root; the table goes to
+stdout). Targets: :func:`mrfpe.testing.box_gaussian`.
 
-    python tests/samplers/accuracy_table.py                 # every sampler, 3-D, 3 seeds
-    python tests/samplers/accuracy_table.py --dim 10 pmc smc mh
-    python tests/samplers/accuracy_table.py --seeds 5 --set pmc.variant=thesis2 pmc
+    python benchmarks/bench_accuracy.py                 # every sampler, 3-D, 3 seeds
+    python benchmarks/bench_accuracy.py --dim 10 pmc smc mh
+    python benchmarks/bench_accuracy.py --seeds 5 --set pmc.variant=thesis2 pmc
 
 Targets (truth known exactly, no partition offered):
 
@@ -29,42 +30,15 @@ import sys
 import warnings
 
 import numpy as np
-from scipy import stats
 
 import mrfpe
 from mrfpe import posterior as P
-from mrfpe.targets.base import Target
+from mrfpe.testing.targets import BoxGaussian, box_gaussian
 
 SAMPLERS = ["pmc", "sir", "ppf", "mh", "emcee", "dw_q", "dw_r", "smc"]
 
 
-class Gaussian(Target):
-    """N(mean, cov) truncated to the unit cube (more than 5 sd from every face)."""
-
-    bounds: np.ndarray
-
-    def __init__(self, mean: np.ndarray, cov: np.ndarray):
-        self.mean, self.cov = np.asarray(mean, float), np.asarray(cov, float)
-        self.sd = np.sqrt(np.diag(self.cov))
-        self.param_names = tuple(f"p{i}" for i in range(self.mean.size))
-        self.bounds = np.array([[0.0, 1.0]] * self.mean.size)
-        self._mvn = stats.multivariate_normal(self.mean, self.cov)
-
-    def _log_prob(self, theta: np.ndarray) -> np.ndarray:
-        return np.atleast_1d(self._mvn.logpdf(theta))
-
-
-def gaussian(dim: int) -> Gaussian:
-    if dim == 3:
-        sd = np.array([0.05, 0.065, 0.08])
-        corr = np.array([[1.0, -0.5, 0.3], [-0.5, 1.0, 0.4], [0.3, 0.4, 1.0]])
-        return Gaussian([0.42, 0.57, 0.5], corr * np.outer(sd, sd))
-    i = np.arange(dim)
-    corr = 0.7 ** np.abs(i[:, None] - i[None, :])
-    return Gaussian(np.full(dim, 0.5), corr * 0.04**2)
-
-
-def measure(name: str, target: Gaussian, seed: int, config: dict) -> tuple[float, ...]:
+def measure(name: str, target: BoxGaussian, seed: int, config: dict) -> tuple[float, ...]:
     post = mrfpe.sample(name, target, seed=seed, **config)
     m, sd = P.weighted_mean(post), np.sqrt(np.diag(P.weighted_cov(post)))
     err = np.abs(m - target.mean) / target.sd
@@ -95,7 +69,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--set", action="append", default=[], metavar="SAMPLER.KEY=VALUE")
     args = ap.parse_args(argv)
-    target, sets = gaussian(args.dim), parse_sets(args.set)
+    target, sets = box_gaussian(args.dim), parse_sets(args.set)
     lo, hi = (0.85, 1.15) if args.dim == 3 else (0.8, 1.2)
     print(f"{args.dim}-D Gaussian, default configurations, seeds 0..{args.seeds - 1}")
     print("| sampler | config | mean error (sd) | sd ratio | ESS | reliable | |log Z| (se) "

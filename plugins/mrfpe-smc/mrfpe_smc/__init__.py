@@ -12,20 +12,12 @@ systematically, (3) makes random-walk Metropolis moves on π_β' with the cloud'
 covariance times s² (s steered towards ``target_acceptance``), as many as make a
 particle move at least once with probability ``mixing``.
 
-``attrs["log_evidence"]`` = log(∫_box p dθ / vol(box)), mrfpe's convention
-(:mod:`mrfpe.samplers.kit.evidence`): the share of the box where p > 0 (estimated
-from the uniform start's candidates) times the product of the mean incremental
-weights (−inf when no particle finds the support; ``final_beta`` < 1 if
-``max_stages`` stopped the run: then it is the normaliser of p^final_beta).
-``attrs["log_evidence_se"]`` is the stage-wise estimate
-``√(Σ_t (N/ESS_t − 1)/(N − 1))`` (the delta-method variances of the stages' log mean
-incremental weights, summed as if independent, plus the support share's binomial
-term). It ignores the error the particle approximation carries from one stage to
-the next, so it is a lower bound on the true SE (measured on the 3-D and 10-D
-Gaussians of ``tests/samplers/accuracy_table.py``: the spread over 6 seeds is 1.5×
-and 3× it). The final equally weighted cloud is the sample
-set; ``step`` indexes the stages (0: the uniform draw), with ``beta``,
-``acceptance`` and ``n_moves`` per step.
+``log_evidence`` = log(∫_box p / vol(box)) (mrfpe's convention,
+:mod:`mrfpe.samplers.kit.evidence`): the support's share of the box times the product
+of the stages' mean incremental weights. ``log_evidence_se`` sums the stages'
+delta-method variances as if independent, a lower bound on the true SE (the spread
+over 6 seeds on ``benchmarks/bench_accuracy.py``'s Gaussians is 1.5–3× it). The final
+equally weighted cloud is the sample set; ``beta``, ``acceptance``, ``n_moves`` per step.
 """
 
 from __future__ import annotations

@@ -82,6 +82,10 @@ nb_execution_in_temp = False
 autosummary_generate = True
 autosummary_ignore_module_all = False  # a module's public names are its __all__
 autosummary_imported_members = False
+# autosummary's recursive listing imports every submodule, and importing
+# ``mrfpe.__main__`` runs the CLI on Sphinx's own argv (an argparse usage error
+# in the log); it is mocked, and private, so it is never documented anyway.
+autosummary_mock_imports = ["mrfpe.__main__"]
 autodoc_default_options = {"member-order": "bysource"}
 autodoc_typehints = "description"
 autodoc_typehints_format = "short"

@@ -199,9 +199,11 @@ autosummary_context = {
 # -- docstring workarounds -------------------------------------------------------
 # The docstrings are numpy style but written for ``help()`` as much as for Sphinx:
 # plain-text math such as ``|z_j|`` or ``|Σ₂|`` reads as an reST substitution,
-# and ``x``× as an unterminated literal. The fixes below are applied to the text
-# autodoc hands to docutils only; the source docstrings are left to their owners
-# (each fix names its docstring in ``_DOCSTRING_FIXES``).
+# and ``x``× as an unterminated literal. ``_escape`` handles those everywhere, on
+# the text autodoc hands to docutils only. A docstring that is simply wrong for
+# numpydoc is fixed at its source; ``_DOCSTRING_FIXES`` holds only the fixes for
+# files other work is still editing (each names its docstring), to be moved to
+# the source when that work has merged.
 
 _LITERAL = re.compile(r"(``.+?``)")
 _CLOSE_OK = set(" \t-.,:;!?\\/'\")]}>")
@@ -300,7 +302,36 @@ def _write_shadowed(app):
             path.write_text(text)
 
 
+def _resolve_reexport(app, env, node, contnode):
+    """Link ``mrfpe.posterior.diagnose`` to where it is documented.
+
+    A name is described once, in the module that defines it
+    (``mrfpe.posterior.diagnostics.diagnose``); a reference through a package
+    that re-exports it would otherwise render as plain text.
+    """
+    if node.get("refdomain") != "py" or not node.get("reftarget", "").startswith("mrfpe."):
+        return None
+    target = node["reftarget"]
+    modname, _, name = target.rpartition(".")
+    try:
+        obj = getattr(importlib.import_module(modname), name)
+    except (ImportError, AttributeError, ValueError):
+        return None
+    origin = _origin(obj)
+    home = f"{origin}.{obj.__qualname__}" if origin else None
+    if home is None or home == target:
+        home = f"{_homes().get((modname, name), modname)}.{name}"
+    if home == target:
+        return None
+    domain = env.get_domain("py")
+    if home not in domain.objects:
+        return None
+    return domain.resolve_xref(env, node["refdoc"], app.builder, node["reftype"], home,
+                               node, contnode)
+
+
 def setup(app):
+    app.connect("missing-reference", _resolve_reexport)
     app.connect("builder-inited", _write_shadowed, priority=900)  # after autosummary
     app.connect("autodoc-process-docstring", _raw_fixes, priority=100)  # before napoleon
     app.connect("autodoc-process-docstring", _escape, priority=900)  # after napoleon

@@ -4,6 +4,7 @@ Usage (from the repository root)::
 
     python -m benchmarks                       # every suite at the issue's sizes (~40 min)
     python -m benchmarks --only targets        # one suite
+    python -m benchmarks --only kernel         # lean vs classic kernel, ratios in one run
     python -m benchmarks --quick --no-write    # small scenes: a smoke run in about a minute
 
 Each suite's section is written the moment the suite finishes, so an
@@ -19,7 +20,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from benchmarks import bench_samplers, bench_stereo, bench_targets
+from benchmarks import bench_kernel, bench_samplers, bench_stereo, bench_targets
 from benchmarks._common import append_results, command_line, machine
 
 
@@ -55,7 +56,11 @@ def _stereo(quick: bool) -> tuple[str, list[str]]:
             bench_stereo.run(["quarter"] if quick else ["quarter", "half"], plot))
 
 
-SUITE_RUNNERS = {"targets": _targets, "samplers": _samplers, "stereo": _stereo}
+def _kernel(quick: bool) -> tuple[str, list[str]]:
+    return "lean vs classic kernel (issue 14)", bench_kernel.run(quick)
+
+
+SUITE_RUNNERS = {"kernel": _kernel, "targets": _targets, "samplers": _samplers, "stereo": _stereo}
 SUITES = tuple(SUITE_RUNNERS)
 
 

@@ -28,13 +28,17 @@ def sample(sampler: Any, target: Any, *, seed: int | None = None, progress: bool
     holds the keyword settings for a name or a class, e.g.
     ``mrfpe.sample("pmc", target, seed=0, n_samples=1000, n_iterations=20)``;
     an instance carries its own (passing ``config`` with one is a ``TypeError``).
+    A setting the sampler does not take is a ``ValueError`` naming the nearest one.
     """
     import inspect
 
     from mrfpe.samplers import get, validate_sampler
+    from mrfpe.validation import check_keywords, keyword_names
 
     if isinstance(sampler, str) or inspect.isclass(sampler):
-        instance = get(sampler)(**config)
+        cls = get(sampler)
+        check_keywords(config, keyword_names(cls.__init__, 1), f"sampler {cls.__name__}")
+        instance = cls(**config)
     else:
         validate_sampler(type(sampler))
         if config:

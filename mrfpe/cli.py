@@ -9,11 +9,11 @@ expensive step. Usage and input errors print one line, ``mrfpe CMD: error:
 from __future__ import annotations
 
 import argparse
-import difflib
-import inspect
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import Any
+
+from mrfpe.validation import check_keywords, keyword_names
 
 __all__ = ["build_parser", "main", "parse_assignments"]
 
@@ -33,26 +33,6 @@ def parse_assignments(items: Sequence[str], option: str = "--set") -> dict[str, 
         return parse(items)
     except ValueError as exc:
         raise ValueError(f"{option}: {exc}") from None
-
-
-def _keyword_names(fn: Callable[..., Any], skip: int) -> list[str] | None:
-    """Keyword parameters of ``fn`` after the first ``skip``; ``None`` if it takes ``**kw``."""
-    params = list(inspect.signature(fn).parameters.values())[skip:]
-    if any(p.kind is p.VAR_KEYWORD for p in params):
-        return None
-    return [p.name for p in params if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)]
-
-
-def _check_keywords(given: dict[str, Any], valid: list[str] | None, option: str,
-                    what: str) -> None:
-    if valid is None:
-        return
-    for key in given:
-        if key not in valid:
-            near = difflib.get_close_matches(key, valid, n=1)
-            hint = f" (did you mean {near[0]!r}?)" if near else ""
-            raise ValueError(f"{option}: {what} has no parameter {key!r}{hint}; parameters: "
-                             f"{', '.join(valid) or '(none)'}")
 
 
 def _load_scene(path: str) -> Any:
@@ -120,8 +100,8 @@ def _estimate(args: argparse.Namespace) -> int:
         raise ValueError(f"--target: unknown target {args.target!r}; available: "
                          f"{', '.join(mrfpe.targets.names())}")
     cls = get_sampler(args.sampler)
-    _check_keywords(settings, _keyword_names(cls.__init__, 1), "--set",
-                    f"sampler {args.sampler!r}")
+    check_keywords(settings, keyword_names(cls.__init__, 1), f"sampler {args.sampler!r}",
+                   "--set")
     sampler = cls(**settings)
     check_readable(args.scene, "scene")
     out = check_writable(args.out, "--out posterior")
@@ -142,8 +122,8 @@ def _compare(args: argparse.Namespace) -> int:
 
     params = parse_assignments(args.param, "--param")
     cls = get_distance(args.distance)
-    _check_keywords(params, _keyword_names(cls.__call__, 3), "--param",
-                    f"distance {args.distance!r}")
+    check_keywords(params, keyword_names(cls.__call__, 3), f"distance {args.distance!r}",
+                   "--param")
     a, b = _load_posterior(args.a), _load_posterior(args.b)
     print(float(cls()(a, b, **params)))
     return 0

@@ -1,17 +1,35 @@
-"""How many numba threads a call gets: the thread limiter and the per-call budget.
+"""Process-wide numba settings: the thread limiter, the per-call budget, the vector width.
 
 Kept apart from the kernels so that studies and samplers can cap threads
 without importing (and compiling) the numba kernel module.
+
+Vector width (:func:`configure_vector_width`, run when the kernel modules are
+imported). LLVM tunes some AVX-512 CPUs (e.g. Rocket Lake, Ice/Cascade Lake) to
+prefer 256-bit vectors, which costs the kernels 1.2-1.45x. numba has no
+per-function target option and builds one LLVM target machine per process at its
+first compile, so the choice is process-wide: if the CPU has AVX-512F, neither
+``NUMBA_CPU_NAME`` nor ``NUMBA_CPU_FEATURES`` is set, and numba has not compiled
+anything yet, mrfpe sets ``NUMBA_CPU_FEATURES`` to the host's own features plus
+``-prefer-256-bit`` (so other numba code in the process gets 512-bit loops too;
+results are unchanged, only the vector width). numba's cache keys include the
+feature string, so cached code of the two settings never mixes. Opt out with
+``MRFPE_AVX512=0`` in the environment (before importing mrfpe).
 """
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterator
 from contextlib import AbstractContextManager, contextmanager
 
 import numba
 
-__all__ = ["MIN_EVALS_PER_THREAD", "limit_threads", "thread_budget"]
+__all__ = ["MIN_EVALS_PER_THREAD", "configure_vector_width", "limit_threads", "thread_budget",
+           "vector_width"]
+
+#: Environment variable that turns the 512-bit preference off ("0", "off", "no", "false").
+OPT_OUT_ENV = "MRFPE_AVX512"
+_VECTOR_STATE: dict[str, str] = {}
 
 
 #: Smallest work (BRDF evaluations) that earns a thread of its own. A parallel region
@@ -51,3 +69,66 @@ def thread_budget(n_evals: int) -> AbstractContextManager[int]:
     in a fixed order).
     """
     return limit_threads(min(numba.get_num_threads(), int(n_evals) // MIN_EVALS_PER_THREAD))
+
+
+def _numba_compiled_anything() -> bool:
+    """Whether numba's CPU target (and so its LLVM target machine) already exists."""
+    try:
+        from numba.core.registry import cpu_target
+    except ImportError:  # pragma: no cover - other numba layouts: assume it does
+        return True
+    return "_toplevel_target_context" in vars(cpu_target)
+
+
+def configure_vector_width() -> str:
+    """Let numba use 512-bit vectors on AVX-512 hosts, if that is safe (module docstring).
+
+    Returns (and remembers) the outcome: ``"512"`` (set by mrfpe), ``"host"``
+    (left to numba: no AVX-512), ``"user"`` (NUMBA_CPU_NAME/FEATURES set),
+    ``"opt-out"`` (``MRFPE_AVX512=0``) or ``"late"`` (numba had already compiled).
+    """
+    if "state" in _VECTOR_STATE:
+        return _VECTOR_STATE["state"]
+    if os.environ.get(OPT_OUT_ENV, "").strip().lower() in ("0", "off", "no", "false"):
+        state = "opt-out"
+    elif os.environ.get("NUMBA_CPU_NAME") or os.environ.get("NUMBA_CPU_FEATURES") \
+            or numba.config.CPU_NAME or numba.config.CPU_FEATURES:
+        state = "user"
+    elif _numba_compiled_anything():
+        state = "late"
+    else:
+        import llvmlite.binding as ll
+
+        feats = ll.get_host_cpu_features()
+        if not feats.get("avx512f", False):
+            state = "host"
+        else:
+            value = feats.flatten() + ",-prefer-256-bit"
+            # the env var survives numba's config reload at each compile and reaches
+            # worker processes on this host; the attribute covers the current process
+            os.environ["NUMBA_CPU_FEATURES"] = value
+            numba.config.CPU_FEATURES = value
+            state = "512"
+    _VECTOR_STATE["state"] = state
+    return state
+
+
+def vector_width() -> int:
+    """Widest SIMD registers numba's code uses here: 512 with AVX-512 unless 256 is preferred."""
+    import llvmlite.binding as ll
+
+    feats = ll.get_host_cpu_features()
+    if not feats.get("avx512f", False):
+        return 256 if feats.get("avx2", False) or feats.get("avx", False) else 128
+    cfg = numba.config.CPU_FEATURES or ""
+    if _VECTOR_STATE.get("state") in ("512",) or "-prefer-256-bit" in cfg:
+        return 512
+    name = numba.config.CPU_NAME or ll.get_host_cpu_name()
+    # LLVM's 256-bit preference on AVX-512 Intel cores (X86.td TuningPrefer256Bit)
+    return 256 if name in _PREFER_256 else 512
+
+
+_PREFER_256 = frozenset({
+    "skylake-avx512", "cascadelake", "cooperlake", "cannonlake", "icelake-client",
+    "icelake-server", "tigerlake", "rocketlake", "sapphirerapids", "alderlake",
+    "graniterapids", "emeraldrapids", "x86-64-v4"})

@@ -7,12 +7,15 @@ and says what was expected, before any expensive work starts.
 
 from __future__ import annotations
 
+import difflib
+import inspect
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
 
-__all__ = ["check_bool", "check_bounds", "check_choice", "check_positive_int", "check_range",
-           "check_seed", "check_target"]
+__all__ = ["check_bool", "check_bounds", "check_choice", "check_keywords", "check_positive_int",
+           "check_range", "check_seed", "check_target", "keyword_names"]
 
 
 def check_positive_int(name: str, value: Any, minimum: int = 1) -> int:
@@ -88,3 +91,30 @@ def check_target(target: Any) -> np.ndarray:
             raise ValueError(f"target must provide {attr!r} (the Target contract); "
                              f"got {type(target).__name__}")
     return check_bounds(target.bounds, len(target.param_names), "target.bounds")
+
+
+def keyword_names(fn: Callable[..., Any], skip: int = 0) -> list[str] | None:
+    """Keyword parameters of ``fn`` after its first ``skip``; ``None`` if it takes ``**kw``."""
+    params = list(inspect.signature(fn).parameters.values())[skip:]
+    if any(p.kind is p.VAR_KEYWORD for p in params):
+        return None
+    return [p.name for p in params if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)]
+
+
+def check_keywords(given: Mapping[str, Any], valid: list[str] | None, what: str,
+                   option: str = "") -> None:
+    """Raise ``ValueError`` for a key of ``given`` that is not in ``valid`` (``None``:
+    anything goes), naming the nearest valid one and listing them all.
+
+    ``what`` names the receiver (e.g. ``"sampler 'pmc'"``); ``option`` prefixes the
+    message with the option the keys came from (e.g. ``"--set"``).
+    """
+    if valid is None:
+        return
+    for key in given:
+        if key not in valid:
+            near = difflib.get_close_matches(key, valid, n=1)
+            hint = f" (did you mean {near[0]!r}?)" if near else ""
+            prefix = f"{option}: " if option else ""
+            raise ValueError(f"{prefix}{what} has no parameter {key!r}{hint}; parameters: "
+                             f"{', '.join(valid) or '(none)'}")

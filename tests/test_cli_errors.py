@@ -73,7 +73,7 @@ def no_sampling(monkeypatch):
     (["study", "run", "importance_sampling", "--set", "sigm=1", "--out", "{d}/s"],
      "unknown setting 'sigm' for study 'importance_sampling' (did you mean 'sigma'?)"),
     (["study", "run", "pmc_convergence", "--set", 'variants=["bogus"]', "--out", "{d}/s"],
-     "'bogus' is not one of mixture, thesis2, thesis1"),
+     "'bogus' is not one of mixture, thesis2, thesis2_literal, thesis1"),
     (["study", "run", "pmc_conv", "--out", "{d}/s"], "did you mean 'pmc_convergence'"),
 ])
 def test_bad_input_is_one_line_and_exit_2(files, argv, message, capsys, no_sampling):
@@ -123,7 +123,8 @@ def test_every_option_has_help_text():
 def test_study_show_lists_settings(capsys):
     assert cli.main(["study", "show", "pmc_convergence"]) == 0
     out = capsys.readouterr().out
-    assert "variants" in out and "one of: mixture, thesis2, thesis1" in out and "(grid)" in out
+    assert "variants" in out and "(grid)" in out
+    assert "one of: mixture, thesis2, thesis2_literal, thesis1" in out
 
 
 def test_posterior_files_still_round_trip(files):

@@ -39,7 +39,11 @@ Input validation (:func:`as_sample_sets`) at the public boundary:
 * NaN log weights count as ``-inf`` (as in :func:`mrfpe.posterior.normalise_log_weights`);
   a set whose every log weight is ``-inf``/NaN has zero total weight and
   raises ``ValueError`` (there is no distribution to compare);
-* fewer than ``min_samples`` samples raises ``ValueError``.
+* fewer than ``min_samples`` samples raises ``ValueError``;
+* a posterior of ``kind="optima"`` (a multi-start optimiser's optima, not
+  posterior draws) is accepted — the distance still computes — but one
+  :class:`mrfpe.PosteriorWarning` per call names every such posterior: the number
+  then compares sets of optima, not posteriors.
 """
 
 from __future__ import annotations
@@ -149,6 +153,17 @@ def as_sample_sets(posteriors: Sequence[Any], names: Sequence[str] | None = None
     out: list[SampleSet] = []
     for post, name in zip(posteriors, names, strict=True):
         out.append(_sample_set(post, name, min_samples, out[0].params if out else None))
+    optima = [n for s, n in zip(out, names, strict=True)
+              if s.source.attrs.get("kind", "draws") == "optima"]
+    if optima:
+        import warnings
+
+        from mrfpe.posterior.diagnostics import PosteriorWarning
+
+        warnings.warn(f"{', '.join(optima)} {'is' if len(optima) == 1 else 'are'} of "
+                      "kind='optima' (a multi-start optimiser's optima, not posterior draws): "
+                      "the distance compares sets of optima, not posteriors",
+                      PosteriorWarning, stacklevel=3)
     return out
 
 

@@ -7,19 +7,25 @@ Dims ``sample``, ``param``, ``step``.
 Variables: ``theta(sample, param)`` (float64, finite), ``log_weight(sample)``
 (normalised: logsumexp = 0; at least one finite), ``log_target(sample)``,
 ``map_theta(step, param)``, ``map_log_target(step)`` (best so far), ``ess(step)``
-(Kish, per step); optional ``history_theta(step, sample, param)``,
+(weighted sets: Kish, per step; MCMC: ArviZ's chain ESS of the states kept so far
+at :data:`~mrfpe.samplers.kit.ESS_CHECKPOINTS` checkpoints, NaN elsewhere);
+optional ``history_theta(step, sample, param)``,
 ``history_log_weight(step, sample)`` and ``chain(sample)`` (int64 chain label of
 each sample, for MCMC: equal-length chains, draw order kept within a chain).
 
 Attributes: ``sampler``, ``config`` (JSON), ``seed`` (−1 for None), ``target``
 (JSON), ``mrfpe_version``, ``n_target_evals``, ``wall_time_s``; ``kind``
 (``"draws"``, a sample of the posterior, or ``"optima"``, the optima of a
-multi-start optimiser); the diagnostics of :func:`diagnose` as ``diag_ess``,
+multi-start optimiser); optional ``chain_type`` (``"ensemble"`` for interacting
+walkers, judged by a nested R̂; absent: independent chains); the diagnostics of
+:func:`diagnose` as ``diag_ess``,
 ``diag_ess_kish``, ``diag_ess_chain``, ``diag_pareto_k``, ``diag_rhat`` (floats, NaN
 where not applicable), ``diag_reliable`` (bool) and ``diag_messages`` (list of
-str); optional ``log_evidence`` and ``log_evidence_se`` (floats,
-:func:`mrfpe.resampling.log_evidence`: for a pseudolikelihood target the
-normaliser of the pseudolikelihood, not a model evidence).
+str); optional ``log_evidence`` and ``log_evidence_se`` (floats): the log normaliser
+of the target *relative to the box*, ``log(∫_box p / vol(box))`` (the evidence under
+the uniform prior on the bounds; :mod:`mrfpe.samplers.kit.evidence`), absent where
+a sampler defines none; for a pseudolikelihood target the normaliser of the
+pseudolikelihood, not a model evidence.
 
 Reliability thresholds (:mod:`mrfpe.posterior.diagnostics`): ESS ≥ 100, Pareto
 k̂ ≤ min(1 − 1/log10 S, 0.7) (Vehtari et al. 2024), R̂ ≤ 1.01 with several chains

@@ -32,7 +32,7 @@ def _diagnostics_lines(post: xr.Dataset) -> list[str]:
     lines += [f"  - {m}" for m in d["messages"]]
     ev = post.attrs.get("log_evidence")
     if ev is not None:
-        lines.append(f"log evidence (normaliser of the target) {ev:.6g} ± "
+        lines.append(f"log evidence (relative to the box: log ∫p / vol) {ev:.6g} ± "
                      f"{post.attrs.get('log_evidence_se', float('nan')):.3g}")
     return lines
 

@@ -13,7 +13,13 @@ import xarray as xr
 from scipy.special import logsumexp
 
 from mrfpe.posterior.diagnostics import ATTRS as _DIAG_ATTRS
-from mrfpe.posterior.diagnostics import KINDS, diagnose, diagnostics_attrs, warn_if_unreliable
+from mrfpe.posterior.diagnostics import (
+    CHAIN_TYPES,
+    KINDS,
+    diagnose,
+    diagnostics_attrs,
+    warn_if_unreliable,
+)
 from mrfpe.resampling import check_log_weights, normalise_log_weights
 
 __all__ = ["build", "validate"]
@@ -101,9 +107,9 @@ def build(
         the ESS and R̂ then come from the chains (:func:`mrfpe.posterior.diagnose`).
     kind : ``"draws"`` (a sample of the posterior) or ``"optima"`` (the optima of a
         multi-start optimiser: diagnosed as not a posterior sample, not warned about).
-    log_evidence, log_evidence_se : the importance-sampling estimate of the
-        target's normaliser and its standard error
-        (:func:`mrfpe.resampling.log_evidence`), stored as attributes if given.
+    log_evidence, log_evidence_se : the estimate of the target's log normaliser
+        relative to the box, ``log(∫_box p / vol(box))``, and its standard error
+        (:func:`mrfpe.samplers.kit.box_log_evidence`), stored as attributes if given.
     sampler : the sampler's registered name.
     target : the target object (its ``describe()`` is stored) or a dict.
     extra_vars : further ``{name: (dims, values)}`` variables (e.g. ``acceptance``).
@@ -208,7 +214,7 @@ _OPTIONAL_VARS = {"history_theta": ("step", "sample", "param"),
 _REQUIRED_ATTRS = {"sampler": str, "config": str, "seed": int, "target": str,
                    "mrfpe_version": str, "n_target_evals": float, "wall_time_s": float}
 #: Attributes checked when present (build always writes ``kind`` and the ``diag_*``).
-_OPTIONAL_ATTRS = {"kind": str, "log_evidence": float, "log_evidence_se": float,
+_OPTIONAL_ATTRS = {"kind": str, "chain_type": str, "log_evidence": float, "log_evidence_se": float,
                    **_DIAG_ATTRS}
 
 
@@ -289,6 +295,9 @@ def validate(post: Any) -> None:
         v = post.attrs[key]
         if not _attr_ok(v, typ):
             raise ValueError(f"attribute {key!r} must be {typ.__name__}; got {v!r}")
+    if post.attrs.get("chain_type", "independent") not in CHAIN_TYPES:
+        raise ValueError(f"attribute 'chain_type' must be one of {CHAIN_TYPES}; got "
+                         f"{post.attrs['chain_type']!r}")
     if post.attrs.get("kind", "draws") not in KINDS:
         raise ValueError(f"attribute 'kind' must be one of {KINDS}; got {post.attrs['kind']!r}")
     if "chain" in post:

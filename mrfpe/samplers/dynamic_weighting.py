@@ -48,7 +48,7 @@ is the estimator the method's authors use for expectations, stratified truncatio
 :func:`stratified_truncation` with ``n_strata`` strata of log ϱ and truncation
 at the ``truncation`` quantile within each; ``"raw"`` is ``log_weight`` = log Π_i
 as before. Measured on a 3-D Gaussian at the default budget
-(tests/samplers/accuracy_table.py, 3 seeds) neither is accurate — R-type mean
+(benchmarks/bench_accuracy.py, 3 seeds) neither is accurate — R-type mean
 error ~0.35 sd, Q-type 2 sd — because one 20000-step chain's weights are
 dominated by a few excursions; truncation raises the Kish ESS (R: ~18 → ~50,
 Q: ~5 → ~28) but not enough. Treat these posteriors as unreliable unless
@@ -192,7 +192,6 @@ class _DynamicWeighting(Sampler):
         log_pi = self._initial_log_weight(lp)
         acceptance = np.zeros(n)
         kept = KeptStates(n, self.burn_in, self.thin, c, d, weighted=True)
-        lse1 = lse2 = -np.inf  # running logsumexp of the kept log w and 2 log w (Kish ESS)
         for t in range(n):
             y = x + sd * rng.standard_normal((c, d))
             inside = np.all((y >= lo) & (y <= hi), axis=1)
@@ -211,11 +210,9 @@ class _DynamicWeighting(Sampler):
             x[accept], lp[accept] = y[accept], lpy[accept]
             acceptance[t] = accept.mean()
             run.offer(x, lp)
-            if kept.record(t, x, lp, log_pi):
-                lse1 = np.logaddexp(lse1, np.logaddexp.reduce(log_pi))
-                lse2 = np.logaddexp(lse2, np.logaddexp.reduce(2 * log_pi))
-            ess = np.exp(2 * lse1 - lse2) if np.isfinite(lse1) else np.nan
-            run.step(t, ess, acceptance=float(acceptance[t]),
+            kept.record(t, x, lp, log_pi)
+            # chain ESS x Kish efficiency of the raw kept weights at checkpoints, NaN elsewhere
+            run.step(t, kept.trace_ess(t), acceptance=float(acceptance[t]),
                      max_log_weight=float(np.max(log_pi)))
         theta, log_target, lw = kept.flat()
         if self.weights == "stratified":  # the estimator the method's authors use

@@ -9,8 +9,10 @@ random state is seeded from the same ``SeedSequence`` as the start points, so
 one ``seed`` fixes every number. The target is −inf outside its bounds, so
 stretch moves that leave the box are rejected and every sample respects the
 bounds. The post-burn-in, thinned walker positions are the equal-weight
-sample set. Default budget: 32 walkers × 625 steps = 20000 evaluations, the
-thesis's MCMC budget (7.4).
+sample set, marked ``attrs["chain_type"] = "ensemble"``: the walkers are not
+independent chains, so :func:`mrfpe.posterior.diagnose` judges them by the nested
+R̂ of walker superchains (its docstring says why). Default budget: 32 walkers ×
+625 steps = 20000 evaluations, the thesis's MCMC budget (7.4).
 """
 
 from __future__ import annotations
@@ -92,7 +94,7 @@ class EmceeEnsemble(Sampler):
             prev = x.copy()
             run.offer(x, lp)
             kept.record(t, x, lp)
-            run.step(t, np.nan, acceptance=float(acceptance[t]))
+            run.step(t, kept.trace_ess(t), acceptance=float(acceptance[t]))
         try:
             tau = emcee.autocorr.integrated_time(kept.theta, tol=0)  # tol=0: no length warning
         except Exception:  # a chain too short to estimate it
@@ -101,4 +103,5 @@ class EmceeEnsemble(Sampler):
         extra = {"acceptance": (("step",), acceptance),
                  "autocorr_time": (("param",), np.asarray(tau, float))}
         return run.finish(theta, log_target, None, sampler=self.name, config=self.get_config(),
-                          seed=seed, chain=kept.chain(), extra_vars=extra)
+                          seed=seed, chain=kept.chain(), extra_vars=extra,
+                          extra_attrs={"chain_type": "ensemble"})  # walkers interact

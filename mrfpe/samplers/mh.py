@@ -125,7 +125,8 @@ class MetropolisHastings(Sampler):
                     if not shaped:  # leaving the initial kernel: optimal Gaussian scale
                         log_scale, shaped = np.log(2.38 / np.sqrt(d)), True
             kept.record(t, x, lp)
-            run.step(t, np.nan, acceptance=float(acceptance[t]), proposal_scale=float(scale))
+            run.step(t, kept.trace_ess(t), acceptance=float(acceptance[t]),
+                     proposal_scale=float(scale))
         theta, log_target, _ = kept.flat()
         return run.finish(theta, log_target, None, sampler=self.name, config=self.get_config(),
                           seed=seed, chain=kept.chain(),

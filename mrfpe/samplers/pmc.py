@@ -21,15 +21,29 @@ Variants
     start is a scrambled Halton design (``initial="halton"``; a tensor grid in
     10-D is the 2¹⁰ corners of {0.25, 0.75}¹⁰) and the kernel follows the cloud's
     weighted covariance (``kernel="covariance"``, :func:`~mrfpe.samplers.kit.covariance_kernel`):
-    extensions beyond the thesis, measured in ``tests/samplers/accuracy_table.py``
+    extensions beyond the thesis, measured in ``benchmarks/bench_accuracy.py``
     and ``benchmarks/bench_pmc.py``. ``kernel="adaptive"`` (diagonal
     ``min(σ_n, h·sd_j)``, the default until issue 12: too narrow once σ_n → 0,
     weighted sd 0.67–0.77 of the truth) and ``initial="grid"`` are kept;
     ``power=<float>, kernel="isotropic"`` is the thesis's fixed softening and
     spherical ``σ_n``.
-``"thesis2"`` (PMC (II), 6.6.2, exact): the set represents the uniform
-    distribution: ``w = c^{n-1} G^n(a^{n-1})`` (6.67), resample with jitter,
-    ``c^n = 1 / G^n(a^n)``; final weights ``ePL(a) / G^{T-1}(a)``.
+``"thesis2"`` (PMC (II), 6.6.2, read as compounding): resample with
+    ``w = G^n(a^{n-1})`` — 6.67's ``c^{n-1}`` taken as the ``c̄ = 1/N`` that
+    resampleParticles returns (5.1.1 step 6) —, jitter, and keep
+    ``c^n = 1 / G^n(a^n)`` for π and the weight variance; final weights
+    ``ePL(a) / G^{T-1}(a)``; softening :data:`THESIS2_POWER` = 1e-4. The cloud's
+    density then compounds, ``≈ ∏_j G^j`` (an annealing ladder over 7.9's cycled
+    sub-lattices), which is what reproduces Table 7.1's fall of the MAP distance and
+    of the weight variances (``docs/results/pmc_thesis2_readings/report.md``, 30
+    scenes). The final weights are then not exact importance weights of the
+    posterior (the cloud is not distributed as ``G^{T-1}``): use it for the MAP;
+    ``"mixture"`` is the exact variant.
+``"thesis2_literal"`` (PMC (II), 6.6.2 as printed): ``w = c^{n-1} G^n(a^{n-1})``
+    (6.67) with ``c^{n-1} = 1/G^{n-1}(a^{n-1})`` at the same points, i.e.
+    ``G^n/G^{n-1}``: it undoes the previous selection every iteration, so the cloud
+    stays distributed as one ``G^n`` and nothing accumulates; with ``k = 1`` the
+    weight is exactly 1 (no selection at all after iteration 0). Kept for studies;
+    softening :data:`THESIS_POWER`.
 ``"thesis1"`` (PMC (I), 6.6.1, exact): the set represents the target at every
     iteration: ``v = π^{n-1} G^n(θ^{n-1}) / ePL(θ^{n-1})`` (6.66), resample with
     jitter, ``π^n = ePL(θ^n) / G^n(θ^n)``, resample (full-target evaluations
@@ -45,6 +59,14 @@ from a *fresh ancestor* (:func:`~mrfpe.samplers.kit.jitter_resampled`): the draw
 then follow the untruncated mixture restricted to the box, whose normaliser is
 one global constant that self-normalisation removes. Particles where ``G^n`` is
 zero get zero weight in the thesis variants (``1/G`` is undefined there).
+
+Evidence: the mixture variant's final weights ``ϱ/q^{T-1}`` are importance weights
+of a normalised proposal, so its posteriors carry ``log_evidence`` and
+``log_evidence_se``, relative to the box (:mod:`mrfpe.samplers.kit.evidence`;
+with ``kernel="covariance"`` the box mass of the untruncated mixture is
+estimated from extra draws after the run). The thesis variants divide by an
+unnormalised ``G^{T-1}`` that their draws only approximately follow: no
+normaliser is defined and none is reported.
 
 The MAP trace is best-so-far under the *full* target: each iteration
 evaluates the full target at its best particle under ``G^n`` (one evaluation,
@@ -62,9 +84,11 @@ import xarray as xr
 from mrfpe.samplers.base import Callback, Sampler, check_choice, check_positive_int, check_range
 from mrfpe.samplers.kit import (
     RESAMPLING_METHODS,
+    THESIS2_POWER,
     THESIS_POWER,
     History,
     Run,
+    box_log_evidence,
     check_bool,
     check_seed,
     check_target,
@@ -73,7 +97,9 @@ from mrfpe.samplers.kit import (
     grid,
     jitter,
     jitter_mixture,
+    log_box_volume,
     log_kernel_mass,
+    log_mixture_box_mass,
     log_mixture_density,
     log_ratio,
     normalise_log_weights,
@@ -84,7 +110,8 @@ from mrfpe.samplers.kit import (
 )
 
 __all__ = ["PMC", "THESIS_POWER", "Context", "PMCState", "final_log_weight", "init_state",
-           "mixture_step", "thesis1_step", "thesis2_step"]
+           "mixture_log_evidence", "mixture_step", "thesis1_step", "thesis2_literal_step",
+           "thesis2_step"]
 
 
 class Context(NamedTuple):
@@ -109,6 +136,8 @@ class PMCState(NamedTuple):
     resampled : whether this iteration resampled (mixture with ``ess_threshold``).
     log_target : full target at ``x`` when the step evaluated it (PMC (I)), else None.
     x_next, log_target_next : PMC (I)'s step-3 resampled set, the next iteration's input.
+    mixture : mixture with ``kernel="covariance"``: ``(centres, log_w, chol)`` of the
+        untruncated mixture ``log_den`` is the density of (for its box mass, the evidence).
     """
 
     x: np.ndarray
@@ -119,6 +148,7 @@ class PMCState(NamedTuple):
     log_target: np.ndarray | None = None
     x_next: np.ndarray | None = None
     log_target_next: np.ndarray | None = None
+    mixture: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
 
 def init_state(x: np.ndarray, power: float | str) -> PMCState:
@@ -129,6 +159,27 @@ def init_state(x: np.ndarray, power: float | str) -> PMCState:
 def final_log_weight(state: PMCState, log_target: np.ndarray) -> np.ndarray:
     """The final reweighting with the full target: ``log ϱ(x) − log_den``."""
     return log_target if state.log_den is None else log_ratio(log_target, state.log_den)
+
+
+def mixture_log_evidence(state: PMCState, log_weight: np.ndarray, bounds: np.ndarray,
+                         rng: np.random.Generator) -> dict[str, float]:
+    """``{"log_evidence": …, "log_evidence_se": …}`` (relative to the box,
+    :mod:`mrfpe.samplers.kit.evidence`) of the mixture variant's final weights
+    ``ϱ(x)/q(x)``; empty when every weight is zero (``build`` refuses the set).
+
+    ``q`` is the last jittered resample's density: exact on the box for the
+    diagonal kernels, the untruncated mixture for ``kernel="covariance"`` (its box
+    mass is estimated with ``rng``, after the run, so the draws are unchanged); with
+    a single iteration the weights are ``ϱ`` itself on the uniform start.
+    """
+    if not np.isfinite(log_weight).any():
+        return {}
+    log_vol = log_box_volume(bounds)
+    lw = log_weight + log_vol if state.log_den is None else log_weight  # U(box): q = 1/vol
+    mass, mass_se = (0.0, 0.0) if state.mixture is None else log_mixture_box_mass(
+        *state.mixture, bounds, rng)
+    lz, se = box_log_evidence(lw, bounds, mass, mass_se)
+    return {"log_evidence": lz, "log_evidence_se": se}
 
 
 # Each step maps (config, context, state, iteration n, importance function G^n) to the new
@@ -148,8 +199,12 @@ def mixture_step(pmc: PMC, ctx: Context, state: PMCState, n: int,
     ok = pmc.ess_threshold is None or ess(lw_prev) < pmc.ess_threshold * lw_prev.size
     idx = (resample(lw_prev, pmc.n_samples, pmc.resampling, ctx.rng) if ok
            else np.arange(x.shape[0]))
+    mixture = None
     if pmc.kernel == "covariance":  # full kernel, out-of-box draws take a fresh ancestor
-        x_new, lq = jitter_mixture(x, idx, covariance_kernel(x, lw_prev), ctx.bounds, ctx.rng)
+        chol = covariance_kernel(x, lw_prev)
+        x_new, lq = jitter_mixture(x, idx, chol, ctx.bounds, ctx.rng)
+        anc, counts = np.unique(idx, return_counts=True)
+        mixture = (x[anc], np.log(counts / idx.size), chol)
     else:  # diagonal kernels truncated to the box, with their exact normalisers
         anc, counts = np.unique(idx, return_counts=True)
         sigma = pmc._kernel(n, x, lw_prev)
@@ -158,25 +213,36 @@ def mixture_step(pmc: PMC, ctx: Context, state: PMCState, n: int,
         lq = log_mixture_density(x_new, x[anc], log_w, sigma)
     raw = run.evaluate(g, x_new)
     power, lw = pmc._soften(raw, lq, state.power)
-    return PMCState(x=x_new, log_weight=lw, log_den=lq, power=power, resampled=bool(ok)), raw
+    return PMCState(x=x_new, log_weight=lw, log_den=lq, power=power, resampled=bool(ok),
+                    mixture=mixture), raw
 
 
 def thesis2_step(cfg: Any, ctx: Context, state: PMCState, n: int,
-                 g: Any) -> tuple[PMCState, np.ndarray]:
-    """PMC (II), 6.6.2: ``w = c^{n-1} G^n(a^{n-1})`` (6.67), resample with jitter,
-    ``c^n = 1 / G^n(a^n)``; the set keeps representing the uniform distribution.
+                 g: Any, *, literal: bool = False) -> tuple[PMCState, np.ndarray]:
+    """PMC (II), 6.6.2: resample with ``w = c^{n-1} G^n(a^{n-1})`` (6.67), jitter,
+    ``c^n = 1 / G^n(a^n)``.
 
+    ``literal=False`` (variant ``"thesis2"``) takes ``c^{n-1}`` as the ``1/N`` that
+    resampling returns, so ``w = G^n(a^{n-1})`` and the selections compound;
+    ``literal=True`` (``"thesis2_literal"``) as ``1/G^{n-1}(a^{n-1})``, so the set
+    keeps representing the uniform distribution (and ``k = 1`` gives ``w = 1``).
     ``cfg`` provides ``n_samples``, ``resampling`` and ``sigma(n)`` (PMC and PPF do).
     """
     run, x = ctx.run, state.x
     w = run.evaluate(g, x)  # u^0 grid weighted by G^0 (6.6.2, n = 0, step 1)
-    if n > 0:
-        w = state.log_weight + w  # 6.67
+    if n > 0 and literal:
+        w = state.log_weight + w  # 6.67 with c^{n-1} = 1/G^{n-1}(a^{n-1})
     idx = resample(w, cfg.n_samples, cfg.resampling, ctx.rng)
     a = jitter(x[idx], cfg.sigma(n), ctx.bounds, ctx.rng)
     lg = run.evaluate(g, a)
     lc = log_ratio(0.0, lg)  # c^n = 1/G^n(a^n), zero where G^n = 0
     return state._replace(x=a, log_weight=lc, log_den=lg), lg
+
+
+def thesis2_literal_step(cfg: Any, ctx: Context, state: PMCState, n: int,
+                         g: Any) -> tuple[PMCState, np.ndarray]:
+    """PMC (II) with 6.67 read literally (:func:`thesis2_step` with ``literal=True``)."""
+    return thesis2_step(cfg, ctx, state, n, g, literal=True)
 
 
 def thesis1_step(cfg: Any, ctx: Context, state: PMCState, n: int,
@@ -202,7 +268,7 @@ def thesis1_step(cfg: Any, ctx: Context, state: PMCState, n: int,
 
 
 STEPS: dict[str, Step] = {"mixture": mixture_step, "thesis2": thesis2_step,
-                          "thesis1": thesis1_step}
+                          "thesis2_literal": thesis2_literal_step, "thesis1": thesis1_step}
 
 
 class PMC(Sampler):
@@ -210,7 +276,7 @@ class PMC(Sampler):
 
     Configuration (the thesis's settings, 6.6 and 7.4, where it gives them):
     ``n_samples`` = 1000 particles, ``n_iterations`` = 20, ``variant`` ("mixture",
-    "thesis2", "thesis1"), ``k`` = 3 sub-lattices of kind ``partition`` cycled as
+    "thesis2", "thesis2_literal", "thesis1"), ``k`` = 3 sub-lattices of kind ``partition`` cycled as
     importance functions (7.9), softening ``power`` (5.69–5.72), ``sigma0`` = 0.07
     initial jitter decreasing linearly to 0, ``kernel`` shape, ``resampling``
     scheme (see :mod:`mrfpe.resampling`),
@@ -223,7 +289,8 @@ class PMC(Sampler):
     ``kernel="covariance"`` (the cloud's weighted covariance), ``initial="halton"``
     and systematic
     resampling (less drift, so a second mode survives to the final reweighting);
-    for the thesis variants the fixed :data:`THESIS_POWER`, the spherical ``σ_n``,
+    for the thesis variants a fixed power (:data:`THESIS2_POWER` for "thesis2",
+    :data:`THESIS_POWER` for the others), the spherical ``σ_n``,
     the grid and multinomial resampling exactly as 6.6. The thesis gives no softening
     power, and on a 100x100 PL the spherical kernel cannot follow a target
     that is ~100x sharper in one parameter than along a ridge in the others:
@@ -242,11 +309,11 @@ class PMC(Sampler):
                  keep_history: bool = False):
         self.n_samples = check_positive_int("n_samples", n_samples, 2)
         self.n_iterations = check_positive_int("n_iterations", n_iterations, 1)
-        self.variant = check_choice("variant", variant, ("mixture", "thesis2", "thesis1"))
+        self.variant = check_choice("variant", variant, tuple(STEPS))
         self.k = check_positive_int("k", k, 1)
         self.partition = check_choice("partition", partition, ("strided", "block"))
         if power is None:  # the variant's default (see the class docstring)
-            power = "auto" if variant == "mixture" else THESIS_POWER
+            power = {"mixture": "auto", "thesis2": THESIS2_POWER}.get(variant, THESIS_POWER)
         if isinstance(power, str):
             check_choice("power", power, ("auto",))
             if variant != "mixture":
@@ -355,5 +422,9 @@ class PMC(Sampler):
             history.record(state.x, lw)
             run.step(n, ess(lw), sigma=self.sigma(n), resampled=state.resampled,
                      power=state.power)
+        # the thesis variants' final weights ϱ/G divide by an unnormalised G^{T-1} whose
+        # draws only approximately follow it: no normaliser is defined, none reported
+        ev = (mixture_log_evidence(state, lw, bounds, ctx.rng) if self.variant == "mixture"
+              else {})
         return run.finish(state.x, lt, lw, sampler=self.name, config=self.get_config(),
-                          seed=seed, **history.build_kwargs())
+                          seed=seed, **ev, **history.build_kwargs())

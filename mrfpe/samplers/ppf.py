@@ -13,7 +13,7 @@ The importance functions are the target's sub-lattice targets when it offers
 ``partition`` (``P`` partitions, 5.67 blocks / 5.68 strided), softened with
 power ``l`` (5.69–5.72); otherwise ``P`` stages of the softened full target.
 Over one time step this is PMC (II) with ``P`` iterations (thesis 5.6):
-``PPF(n_partitions=P, k=P)`` and ``PMC(variant="thesis2", n_iterations=P, k=P)``
+``PPF(n_partitions=P, k=P)`` and ``PMC(variant="thesis2_literal", n_iterations=P, k=P)``
 give the same numbers, which the tests check.
 
 Weights (``weights``): ``"thesis"`` is the above, bit-for-bit (with the thesis's
@@ -24,7 +24,8 @@ accounts for the jitter: by 5.6 PPF over one time step is PMC, so each partition
 runs PMC's deterministic-mixture step (:func:`mrfpe.samplers.pmc.mixture_step`:
 weights ``g^n(x)^l / q^n(x)`` with ``q^n`` the jittered resample's density, a kernel
 following the cloud's covariance, the power annealed, ``power="auto"``) from the
-same grid, and the final weights are ``ϱ(x) / q(x)``.
+same grid, and the final weights are ``ϱ(x) / q(x)``; they give ``log_evidence`` and
+``log_evidence_se`` as PMC's do (:func:`mrfpe.samplers.pmc.mixture_log_evidence`).
 
 ``σ_n = σ₀ (1 − n/P)``; a jittered particle that leaves the bounds is redrawn
 from the same kernel. Particles where ``g^n`` vanishes get zero weight. The MAP
@@ -58,8 +59,9 @@ from mrfpe.samplers.pmc import (
     Context,
     final_log_weight,
     init_state,
+    mixture_log_evidence,
     mixture_step,
-    thesis2_step,
+    thesis2_literal_step,
 )
 
 __all__ = ["PPF"]
@@ -116,7 +118,7 @@ class PPF(Sampler):
         parts = partition_or_none(target, self.k, self.partition) or [target]
         if self.weights == "thesis":
             # 5.33 (π ← π g^n), resample with noise, 5.34 (π ← π / g^n): PMC (II)'s step
-            G, cfg, step = [softened(p, self.power) for p in parts], self, thesis2_step
+            G, cfg, step = [softened(p, self.power) for p in parts], self, thesis2_literal_step
         else:  # the jitter accounted for: PMC's deterministic-mixture step (thesis 5.6)
             G, cfg, step = parts, self._mixture_config(), mixture_step
         run = Run(target, P, progress=progress, callback=callback, desc="ppf")
@@ -134,5 +136,8 @@ class PPF(Sampler):
                 run.offer_candidate(state.x, lg)
             history.record(state.x, lw)
             run.step(n, ess(lw), sigma=self.sigma(n))
+        # mixture weights are importance weights (PMC's evidence); the thesis's 1/g^n are not
+        ev = (mixture_log_evidence(state, lw, bounds, ctx.rng) if self.weights == "mixture"
+              else {})
         return run.finish(state.x, lt, lw, sampler=self.name, config=self.get_config(),
-                          seed=seed, **history.build_kwargs())
+                          seed=seed, **ev, **history.build_kwargs())

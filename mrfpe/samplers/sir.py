@@ -32,6 +32,11 @@ drawn from and the kernel following the cloud's weighted covariance
 last step is exact importance sampling of ϱ; the alternative variant divides by
 the mixture over the grid with the σ_t kernel instead of by ``g^t``.
 The MAP trace is best-so-far under the full target.
+
+Evidence: with ``weights="mixture"`` the last step's weights ``ϱ/q`` are importance
+weights of a normalised proposal, so the posterior carries ``log_evidence`` and
+``log_evidence_se`` relative to the box (:mod:`mrfpe.samplers.kit.evidence`); the
+thesis weights define no normaliser and report none.
 """
 
 from __future__ import annotations
@@ -47,6 +52,7 @@ from mrfpe.samplers.kit import (
     THESIS_POWER,
     History,
     Run,
+    box_log_evidence,
     check_bool,
     check_seed,
     check_target,
@@ -55,6 +61,8 @@ from mrfpe.samplers.kit import (
     grid,
     jitter,
     jitter_mixture,
+    log_box_volume,
+    log_mixture_box_mass,
     log_ratio,
     log_resampling_mixture,
     partition_or_none,
@@ -104,12 +112,27 @@ class SIR(Sampler):
         history = History(self.keep_history)
         x, lw = grid(bounds, self.n_samples), np.zeros(self.n_samples)
         for t in range(self.n_iterations):
-            x, lt, lw = step(t, x, lw, target, run, rng, bounds)
+            x, lt, lw, mixture = step(t, x, lw, target, run, rng, bounds)
             run.offer(x, lt)
             history.record(x, lw)
             run.step(t, ess(lw), sigma=self.sigma(t))
+        ev = self._log_evidence(lw, mixture, bounds, rng)
         return run.finish(x, lt, lw, sampler=self.name, config=self.get_config(), seed=seed,
-                          **history.build_kwargs())
+                          **ev, **history.build_kwargs())
+
+    def _log_evidence(self, lw, mixture, bounds, rng) -> dict[str, float]:
+        """Relative to the box (:mod:`mrfpe.samplers.kit.evidence`), for the mixture
+        weights only: the last step's ``ϱ/q`` are importance weights of a normalised
+        proposal (up to the covariance mixture's box mass ``M``, estimated after the
+        run). The thesis weights (``ϱ^{1/T}``, ``ϱ/g^t``) are not: none is reported."""
+        if self.weights != "mixture" or not np.isfinite(lw).any():
+            return {}
+        if self.n_iterations == 1 and self.variant == "classic":  # ϱ on the uniform grid
+            lw = lw + log_box_volume(bounds)
+        mass, mass_se = (0.0, 0.0) if mixture is None else log_mixture_box_mass(
+            *mixture, bounds, rng)
+        lz, se = box_log_evidence(lw, bounds, mass, mass_se)
+        return {"log_evidence": lz, "log_evidence_se": se}
 
     def _classic_step(self, t, x, lw, target, run, rng, bounds):
         """5.25–5.28: resample (5.28), diffuse, weight by ``ϱ^{1/T}`` (5.26, bootstrap).
@@ -119,17 +142,20 @@ class SIR(Sampler):
         """
         if t == 0:
             lt = run.evaluate(target, x)
-            return x, lt, lt / self.n_iterations  # -inf stays -inf
+            return x, lt, lt / self.n_iterations, None  # -inf stays -inf
         idx = resample(lw, self.n_samples, self.resampling, rng)
         if self.weights == "thesis":
             x_new = jitter(x[idx], self.sigma(t), bounds, rng)
             lt = run.evaluate(target, x_new)
-            return x_new, lt, lt / self.n_iterations
+            return x_new, lt, lt / self.n_iterations, None
         # the kernel follows the cloud (kit.covariance_kernel), not the σ_t schedule: a
         # kernel much narrower than the target makes q spiky and the weights degenerate
-        x_new, lq = jitter_mixture(x, idx, covariance_kernel(x, lw), bounds, rng)
+        chol = covariance_kernel(x, lw)
+        x_new, lq = jitter_mixture(x, idx, chol, bounds, rng)
         lt = run.evaluate(target, x_new)
-        return x_new, lt, log_ratio((t + 1) / self.n_iterations * lt, lq)
+        anc, counts = np.unique(idx, return_counts=True)
+        mixture = (x[anc], np.log(counts / idx.size), chol)  # for the evidence's box mass
+        return x_new, lt, log_ratio((t + 1) / self.n_iterations * lt, lq), mixture
 
     def _alternative_step(self, target, run, u):
         """5.29–5.31 on the fixed set ``u``: ``g^t`` evaluated there once per function."""
@@ -144,7 +170,7 @@ class SIR(Sampler):
             lt = run.evaluate(target, x)
             if self.weights == "mixture":  # the density x was drawn from, jitter included
                 return x, lt, log_ratio(lt, log_resampling_mixture(x, u, idx, self.sigma(t),
-                                                                   bounds))
-            return x, lt, log_ratio(lt, run.evaluate(G[i], x))  # 5.30
+                                                                   bounds)), None
+            return x, lt, log_ratio(lt, run.evaluate(G[i], x)), None  # 5.30
 
         return step

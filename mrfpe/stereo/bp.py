@@ -44,6 +44,11 @@ from typing import Any
 import numpy as np
 from numba import njit
 
+from mrfpe.threads import configure_vector_width
+
+# numba fixes its vector width at the first @njit of the process (mrfpe.threads)
+configure_vector_width()
+
 __all__ = ["SCHEDULES", "SMOOTHNESS_KINDS", "BPResult", "Smoothness", "labelling_energy",
            "loopy_bp"]
 

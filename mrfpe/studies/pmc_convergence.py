@@ -68,7 +68,7 @@ from mrfpe.studies.synthetic import (
 from mrfpe.study import Setting, Study, by_cell
 
 #: PMC's variants (:class:`mrfpe.samplers.pmc.PMC`): Cappé-style mixture, thesis (II), (I).
-VARIANTS = ("mixture", "thesis2", "thesis1")
+VARIANTS = ("mixture", "thesis2", "thesis2_literal", "thesis1")
 
 def trial(config: dict, repeat: int, seed: int) -> xr.Dataset:
     """One scene; PMC for every variant and particle count; per-iteration statistics."""
@@ -220,6 +220,8 @@ def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
 
 STUDY = Study(
     name="pmc_convergence",
+    # 2: issue 12/13 changed sampler defaults and thesis2 (old trials must not resume)
+    version=2,
     doc=__doc__,
     config={"n_trials": 100, "seed": 741},
     settings=[

@@ -73,8 +73,13 @@ def kind_of(default: Any) -> str:
 
 
 def coerce_like(key: str, value: Any, default: Any) -> Any:
-    """``value`` in the type of ``default`` (int -> float widening allowed), else ``ValueError``."""
-    if default is None or value is None:
+    """``value`` in the type of ``default`` (int -> float widening allowed), else ``ValueError``.
+
+    ``null`` is accepted only where the default is ``None`` (a setting that
+    means "the sampler's own default" when unset); elsewhere it is refused
+    here, not left to fail inside a trial.
+    """
+    if default is None:
         return value
     if isinstance(default, bool):
         if isinstance(value, bool):

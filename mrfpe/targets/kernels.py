@@ -50,6 +50,12 @@ from llvmlite import ir
 from numba import njit, prange, types
 from numba.extending import intrinsic, overload
 
+from mrfpe.threads import configure_vector_width
+
+# numba builds its LLVM target machine at the first @njit decoration of the process:
+# choose the vector width before ours (mrfpe.threads explains the choice and opt-out)
+configure_vector_width()
+
 __all__ = ["BLOCK", "N_FEATURES", "block_size", "fexp", "flog", "pl_terms", "pl_terms_labels",
            "vexp", "vexp32", "vlog", "vlog32"]
 

@@ -28,14 +28,36 @@ from mrfpe.testing.samplers import (
     moment_tolerances,
     run_check,
 )
-from mrfpe.testing.targets import CorrelatedGaussian, MostlyMinusInf, TwoModes
+from mrfpe.testing.targets import (
+    BoxGaussian,
+    CorrelatedGaussian,
+    MostlyMinusInf,
+    TwoModes,
+    box_gaussian,
+)
 
 __all__ = [
-    "CHECKS", "CorrelatedGaussian", "MostlyMinusInf", "TwoModes", "check_bounds",
-    "check_callback", "check_config", "check_diagnostics", "check_gaussian_moments",
-    "check_interface", "check_map_trace", "check_mostly_minus_inf", "check_netcdf_roundtrip",
-    "check_reproducible", "check_sampler", "check_schema", "check_two_modes",
-    "moment_tolerances", "run_check",
+    "CHECKS",
+    "BoxGaussian",
+    "CorrelatedGaussian",
+    "MostlyMinusInf",
+    "TwoModes",
+    "box_gaussian",
+    "check_bounds",
+    "check_callback",
+    "check_config",
+    "check_diagnostics",
+    "check_gaussian_moments",
+    "check_interface",
+    "check_map_trace",
+    "check_mostly_minus_inf",
+    "check_netcdf_roundtrip",
+    "check_reproducible",
+    "check_sampler",
+    "check_schema",
+    "check_two_modes",
+    "moment_tolerances",
+    "run_check",
 ]
 
 # Target and distance conformance checks (mrfpe.testing.target_checks, .distance_checks).

@@ -63,3 +63,4 @@ def _run_or_refusal(cls: type, config: dict | None, target_cls: type,
 
 def _fail(name: str, check: str, msg: str) -> AssertionError:
     return AssertionError(f"{check} failed for sampler {name}: {msg}")
+

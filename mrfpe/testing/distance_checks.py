@@ -40,6 +40,8 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
+from mrfpe.testing._collect import run_all
+
 __all__ = [
     "DISTANCE_CHECKS", "check_distance", "check_distance_finite", "check_distance_identity",
     "check_distance_nonnegative", "check_distance_pairwise", "check_distance_symmetric",
@@ -277,22 +279,16 @@ def check_distance(distance: Any) -> dict[str, str]:
     if unknown:
         raise AssertionError(f"{_name(d)}.conformance names unknown checks {unknown}; "
                              f"known: {', '.join(DISTANCE_CHECKS)}")
-    report, failures = {}, []
-    for name, fn in DISTANCE_CHECKS.items():
-        if declared.get(name, True) is False:
-            report[name] = "skipped: declared"
-            continue
-        try:
-            fn(d)
-            report[name] = "passed"
-        except AssertionError as exc:
-            report[name] = "failed"
-            failures.append(str(exc))
-        except ValueError as exc:
-            report[name] = "failed"
-            failures.append(f"check_distance_{name} failed for distance {_name(d)}: "
-                            f"ValueError: {exc}")
-    if failures:
-        raise AssertionError(f"{len(failures)} distance check(s) failed:\n- "
-                             + "\n- ".join(failures))
-    return report
+    def call(name: str, fn: Callable) -> Callable[[], str]:
+        def check() -> str:
+            if declared.get(name, True) is False:
+                return "skipped: declared"
+            try:
+                fn(d)
+            except ValueError as exc:  # a distance refusing valid input is a failure too
+                raise AssertionError(f"check_distance_{name} failed for distance {_name(d)}: "
+                                     f"ValueError: {exc}") from None
+            return "passed"
+        return check
+
+    return run_all({name: call(name, fn) for name, fn in DISTANCE_CHECKS.items()}, "distance")

@@ -53,6 +53,7 @@ import numpy as np
 import xarray as xr
 
 from mrfpe import posterior as _post
+from mrfpe.testing._collect import run_all
 from mrfpe.testing._runs import (
     _cached_run,
     _declared,
@@ -360,14 +361,5 @@ def check_sampler(sampler: Any, *, quick: bool = True) -> dict[str, str]:
     if unknown:
         raise AssertionError(f"{name}.conformance names unknown checks {sorted(unknown)}; "
                              f"known: {', '.join(CHECKS)}")
-    report, failures = {}, []
-    for check in CHECKS:
-        try:
-            report[check] = run_check(cls, check, quick=quick)
-        except AssertionError as exc:
-            report[check] = "failed"
-            failures.append(str(exc))
-    if failures:
-        raise AssertionError(f"{len(failures)} conformance check(s) failed:\n- "
-                             + "\n- ".join(failures))
-    return report
+    return run_all({check: (lambda c=check: run_check(cls, c, quick=quick)) for check in CHECKS},
+                   "conformance")

@@ -36,6 +36,8 @@ from typing import Any
 
 import numpy as np
 
+from mrfpe.testing._collect import run_all
+
 __all__ = [
     "TARGET_CHECKS", "check_target", "check_target_bad_input", "check_target_batch",
     "check_target_bounds", "check_target_cost", "check_target_describe",
@@ -284,18 +286,12 @@ def check_target(target_or_factory: Any, *, rtol: float = 1e-9,
     if unknown:
         raise ValueError(f"skip names unknown checks {unknown}; checks: "
                          f"{', '.join(TARGET_CHECKS)}")
-    report, failures = {}, []
-    for name, fn in TARGET_CHECKS.items():
-        if name in skip:
-            report[name] = "skipped"
-            continue
-        try:
+    def call(name: str, fn: Callable) -> Callable[[], str]:
+        def check() -> str:
+            if name in skip:
+                return "skipped"
             fn(t, rtol=rtol) if name in _TOLERANT else fn(t)
-            report[name] = "passed"
-        except AssertionError as exc:
-            report[name] = "failed"
-            failures.append(str(exc))
-    if failures:
-        raise AssertionError(f"{len(failures)} target check(s) failed:\n- "
-                             + "\n- ".join(failures))
-    return report
+            return "passed"
+        return check
+
+    return run_all({name: call(name, fn) for name, fn in TARGET_CHECKS.items()}, "target")

@@ -11,11 +11,12 @@ import math
 from typing import Any
 
 import numpy as np
+from scipy import stats
 
 from mrfpe.lattice import split_ids
 from mrfpe.targets.base import Target, as_theta_batch
 
-__all__ = ["CorrelatedGaussian", "MostlyMinusInf", "TwoModes"]
+__all__ = ["BoxGaussian", "CorrelatedGaussian", "MostlyMinusInf", "TwoModes", "box_gaussian"]
 
 
 # --------------------------------------------------------------------------
@@ -149,3 +150,35 @@ class MostlyMinusInf(Target):
 
 # --------------------------------------------------------------------------
 # Plumbing
+
+
+class BoxGaussian(Target):
+    """N(mean, cov) in the unit cube, far from every face (issue 12's accuracy targets).
+
+    The normaliser is 1 to within the mass beyond 5 sd, so ``log_evidence`` should be 0;
+    :func:`box_gaussian` builds the 3-D correlated and the 10-D AR(1) instances.
+    """
+
+    bounds: np.ndarray
+
+    def __init__(self, mean: np.ndarray, cov: np.ndarray):
+        self.mean, self.cov = np.asarray(mean, float), np.asarray(cov, float)
+        self.sd = np.sqrt(np.diag(self.cov))
+        self.param_names = tuple(f"p{i}" for i in range(self.mean.size))
+        self.bounds = np.array([[0.0, 1.0]] * self.mean.size)
+        self._mvn = stats.multivariate_normal(self.mean, self.cov)
+
+    def _log_prob(self, theta: np.ndarray) -> np.ndarray:
+        return np.atleast_1d(self._mvn.logpdf(theta))
+
+
+def box_gaussian(dim: int) -> BoxGaussian:
+    """The 3-D correlated Gaussian (sd 0.05–0.08) or, for any other ``dim``, the AR(1)
+    Gaussian (ρ = 0.7, sd 0.04) centred in the unit cube."""
+    if dim == 3:
+        sd = np.array([0.05, 0.065, 0.08])
+        corr = np.array([[1.0, -0.5, 0.3], [-0.5, 1.0, 0.4], [0.3, 0.4, 1.0]])
+        return BoxGaussian([0.42, 0.57, 0.5], corr * np.outer(sd, sd))
+    i = np.arange(dim)
+    corr = 0.7 ** np.abs(i[:, None] - i[None, :])
+    return BoxGaussian(np.full(dim, 0.5), corr * 0.04**2)

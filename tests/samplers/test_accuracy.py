@@ -3,7 +3,7 @@
 Fixed seeds, default budgets, tolerances that the previous defaults failed: PMC's
 diagonal kernel capped by σ_n gave weighted sd 0.67–0.77 of the truth in 3-D, and
 its tensor-grid start failed in 10-D (sd ratio 0.05–0.35). The table over seeds and
-samplers is tests/samplers/accuracy_table.py.
+samplers is benchmarks/bench_accuracy.py.
 """
 
 import numpy as np
@@ -11,8 +11,7 @@ import pytest
 
 import mrfpe
 from mrfpe import posterior as P
-
-from .accuracy_table import gaussian
+from mrfpe.testing import box_gaussian as gaussian
 
 
 def _moments(post, target):

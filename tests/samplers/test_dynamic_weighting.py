@@ -207,8 +207,10 @@ def test_sampler_output(cls):
     ml = post["map_log_target"].values
     assert np.all(np.diff(ml) >= 0)
     np.testing.assert_allclose(TwoModes().log_prob(post["map_theta"].values[-1:]), ml[-1])
-    e = post["ess"].values
-    assert np.all((e >= 1) & (e <= np.arange(1, 3001) + 1e-9))
+    e = post["ess"].values  # chain ESS x Kish efficiency at checkpoints, NaN elsewhere
+    ok = np.isfinite(e)
+    assert ok.sum() == 20 and ok[-1]
+    assert np.all((e[ok] >= 1) & (e[ok] <= np.arange(1, 3001)[ok] + 1e-9))
     assert post.attrs["n_target_evals"] <= 3000 + 2048 + 1
     again = cls(n_steps=3000).run(TwoModes(), seed=1)
     np.testing.assert_array_equal(post["log_weight"].values, again["log_weight"].values)

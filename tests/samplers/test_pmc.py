@@ -174,9 +174,10 @@ def test_bad_target_and_seed():
 
 
 def test_variant_defaults():
-    m, t2 = PMC(), PMC(variant="thesis2")
+    m, t2, lit = PMC(), PMC(variant="thesis2"), PMC(variant="thesis2_literal")
     assert (m.power, m.kernel, m.initial) == ("auto", "covariance", "halton")  # issue 12
-    assert (t2.power, t2.kernel, t2.initial) == (0.01, "isotropic", "grid")
+    assert (t2.power, t2.kernel, t2.initial) == (1e-4, "isotropic", "grid")  # issue 13
+    assert (lit.power, lit.kernel, lit.initial) == (0.01, "isotropic", "grid")
     assert PMC(**m.get_config()).get_config() == m.get_config()  # config round-trips
 
 

@@ -173,3 +173,12 @@ def test_get_and_sample_accept_a_class_or_an_instance():
         mrfpe.sample(PMC(), t, seed=1, n_samples=10)
     with pytest.raises(TypeError):
         mrfpe.sample(object(), t, seed=1)
+
+
+def test_sample_names_the_nearest_setting():
+    import mrfpe
+    from mrfpe.testing import CorrelatedGaussian
+
+    with pytest.raises(ValueError, match=r"sampler PMC has no parameter 'n_iter' \(did you mean "
+                                         r"'n_iterations'\?\); parameters: n_samples, "):
+        mrfpe.sample("pmc", CorrelatedGaussian(), seed=0, n_iter=5)

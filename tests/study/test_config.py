@@ -91,8 +91,10 @@ def test_unknown_setting_names_the_nearest():
 
 def test_declared_settings_check_types_choices_and_values():
     pmc = S.get("pmc_convergence")
-    assert pmc.setting("variants").valid_choices() == ("mixture", "thesis2", "thesis1")
-    with pytest.raises(ValueError, match="'bogus' is not one of mixture, thesis2, thesis1"):
+    assert pmc.setting("variants").valid_choices() == ("mixture", "thesis2", "thesis2_literal",
+                                                        "thesis1")
+    with pytest.raises(ValueError, match="'bogus' is not one of mixture, thesis2, "
+                                         "thesis2_literal, thesis1"):
         S.resolve_config(pmc, overrides=['variants=["bogus"]'])
     with pytest.raises(ValueError, match="setting 'brdf': 'wrd' is not one of"):
         S.resolve_config(pmc, overrides=["brdf=wrd"])
@@ -102,7 +104,8 @@ def test_declared_settings_check_types_choices_and_values():
         S.resolve_config(pmc, overrides=['pmc_options={"nope": 1}'])
     with pytest.raises(ValueError, match="no surface type for lambertian"):
         S.resolve_config(pmc, overrides=['brdf=["lambertian"]'])
-    with pytest.raises(ValueError, match="setting 'target_options': pls options are"):
+    with pytest.raises(ValueError, match=r"setting 'target_options': pls: unknown "
+                                         r"option\(s\) 'bogus'; valid options:"):
         S.resolve_config(pmc, overrides=['target_options={"bogus": 1}'])
     with pytest.raises(ValueError, match="setting 'runs'"):
         S.resolve_config(S.get("target_bias"), overrides=['runs={"x": {"sampler": "nope"}}'])

@@ -32,7 +32,9 @@ Run log
     :func:`mrfpe.posterior.build` keyword: the diagnostics hook).
 Records
     :class:`History` (every step's weighted set, for ``keep_history``),
-    :class:`KeptStates` (an MCMC run's post-burn-in, thinned states).
+    :class:`KeptStates` (an MCMC run's post-burn-in, thinned states; its
+    :meth:`~KeptStates.trace_ess` is the ``ess`` trace entry: ArviZ's chain ESS at
+    :data:`ESS_CHECKPOINTS` evenly spaced kept steps, NaN elsewhere).
 Validators
     :func:`check_target`, :func:`check_seed`, :func:`check_positive_int`,
     :func:`check_range`, :func:`check_choice`, :func:`check_bool`,
@@ -49,8 +51,13 @@ Jitter kernels
     :func:`covariance_kernel` (a kernel shaped like the weighted cloud) and
     :func:`jitter_mixture` (jitter and the mixture density in one call).
 
+Evidence
+    :func:`box_log_evidence` (``log_evidence`` relative to the box, the convention of
+    every importance sampler), :func:`log_box_volume`, :func:`log_mixture_box_mass`
+    (the box mass of an untruncated covariance mixture), :data:`MASS_DRAWS`.
 Importance functions
-    :func:`partition_or_none`, :func:`softened`, :data:`THESIS_POWER`.
+    :func:`partition_or_none`, :func:`softened`, :data:`THESIS_POWER`,
+    :data:`THESIS2_POWER`.
 Weights and resampling
     :func:`resample`, :data:`RESAMPLING_METHODS`, :func:`ess`,
     :func:`normalise_log_weights`, :func:`log_ratio`, :func:`perplexity`.
@@ -61,10 +68,16 @@ from __future__ import annotations
 from mrfpe.mixture import log_mixture_density
 from mrfpe.resampling import METHODS as RESAMPLING_METHODS
 from mrfpe.resampling import ess, log_ratio, normalise_log_weights, perplexity, resample
-from mrfpe.samplers.kit.chains import KeptStates, check_chain_length
+from mrfpe.samplers.kit.chains import ESS_CHECKPOINTS, KeptStates, check_chain_length
 from mrfpe.samplers.kit.draws import draw_in_support, grid, space_filling
+from mrfpe.samplers.kit.evidence import (
+    MASS_DRAWS,
+    box_log_evidence,
+    log_box_volume,
+    log_mixture_box_mass,
+)
 from mrfpe.samplers.kit.history import History
-from mrfpe.samplers.kit.importance import THESIS_POWER, partition_or_none, softened
+from mrfpe.samplers.kit.importance import THESIS2_POWER, THESIS_POWER, partition_or_none, softened
 from mrfpe.samplers.kit.jitter import (
     covariance_kernel,
     jitter,
@@ -85,11 +98,15 @@ from mrfpe.validation import (
 )
 
 __all__ = [
+    "ESS_CHECKPOINTS",
+    "MASS_DRAWS",
     "RESAMPLING_METHODS",
+    "THESIS2_POWER",
     "THESIS_POWER",
     "History",
     "KeptStates",
     "Run",
+    "box_log_evidence",
     "check_bool",
     "check_chain_length",
     "check_choice",
@@ -104,7 +121,9 @@ __all__ = [
     "jitter",
     "jitter_mixture",
     "jitter_resampled",
+    "log_box_volume",
     "log_kernel_mass",
+    "log_mixture_box_mass",
     "log_mixture_density",
     "log_mixture_density_chol",
     "log_ratio",

@@ -8,7 +8,12 @@ import numpy as np
 
 from mrfpe.validation import check_positive_int
 
-__all__ = ["KeptStates", "check_chain_length"]
+__all__ = ["ESS_CHECKPOINTS", "KeptStates", "check_chain_length"]
+
+#: How many evenly spaced kept steps (the last included) get an ESS in the MCMC
+#: ``ess`` trace (:meth:`KeptStates.trace_ess`); ArviZ's ESS over the whole run so far
+#: at every step would cost O(steps²).
+ESS_CHECKPOINTS = 20
 
 
 def check_chain_length(n_steps: Any, burn_in: Any, thin: Any) -> tuple[int, int, int]:
@@ -44,6 +49,9 @@ class KeptStates:
         self.log_target = np.empty((k, n_chains))
         self.log_weight = np.empty((k, n_chains)) if weighted else None
         self._k = 0
+        m = min(ESS_CHECKPOINTS, k)  # evenly spaced, ending at the last kept step
+        marks = (np.arange(1, m + 1) * k) // max(m, 1) - 1
+        self.checkpoints = set(self.steps[marks].tolist()) if k else set()
 
     def record(self, t: int, theta: np.ndarray, log_target: np.ndarray,
                log_weight: np.ndarray | None = None) -> bool:
@@ -56,6 +64,25 @@ class KeptStates:
             self.log_weight[k] = log_weight
         self._k += 1
         return True
+
+    def trace_ess(self, t: int) -> float:
+        """The ``ess`` trace entry of step ``t``: at a checkpoint (:data:`ESS_CHECKPOINTS`
+        evenly spaced kept steps), the autocorrelation-based ESS of the states kept so
+        far — :func:`mrfpe.posterior.diagnostics.chain_ess` pooled over the chains,
+        times Kish's efficiency of the kept weights when ``weighted`` (as
+        :func:`mrfpe.posterior.diagnose` does) —; NaN elsewhere and during burn-in.
+        Never the draw count. Call it after :meth:`record` of step ``t``."""
+        if t not in self.checkpoints or self._k < 4:
+            return float("nan")
+        from mrfpe.posterior.diagnostics import chain_ess
+        from mrfpe.resampling import ess
+
+        x = self.theta[: self._k].transpose(1, 0, 2)  # (chain, draw, param)
+        e = chain_ess(x)
+        if self.log_weight is not None:
+            lw = self.log_weight[: self._k].reshape(-1)
+            e = max(e * ess(lw) / lw.size, 1.0)
+        return float(e)
 
     def flat(self) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         """``(theta (S, d), log_target (S,), log_weight (S,) or None)``, S = K·C, step-major."""

@@ -29,8 +29,9 @@ def grid(bounds: np.ndarray, n: int) -> np.ndarray:
 
 
 def draw_in_support(run: Any, target: Any, rng: np.random.Generator, n: int,
-                    bounds: np.ndarray, max_draws: int = 2048,
-                    ) -> tuple[np.ndarray, np.ndarray]:
+                    bounds: np.ndarray, max_draws: int = 2048, *,
+                    return_fraction: bool = False,
+                    ) -> tuple[np.ndarray, np.ndarray] | tuple[np.ndarray, np.ndarray, float]:
     """``n`` uniform draws in the box, with -inf ones replaced by further uniform draws.
 
     Candidates are drawn and evaluated through ``run.evaluate`` (so they are
@@ -42,11 +43,16 @@ def draw_in_support(run: Any, target: Any, rng: np.random.Generator, n: int,
 
     Returns
     -------
-    theta : (n, d) start points; log_target : (n,) their log densities.
+    theta : (n, d) start points; log_target : (n,) their log densities;
+    fraction : with ``return_fraction``, the share of all evaluated uniform
+        candidates that were finite, an estimate of the support's share of the box
+        (what an evidence relative to the box multiplies by when the draws are then
+        taken as uniform on the support).
     """
     lo, hi = bounds[:, 0], bounds[:, 1]
     theta = lo + (hi - lo) * rng.random((n, lo.size))
     lp = run.evaluate(target, theta)
+    n_tried, n_finite = n, int(np.isfinite(lp).sum())
     batch = max(n, 32)
     for _ in range(-(-max_draws // batch)):
         bad = np.flatnonzero(~np.isfinite(lp))
@@ -54,13 +60,14 @@ def draw_in_support(run: Any, target: Any, rng: np.random.Generator, n: int,
             break
         cand = lo + (hi - lo) * rng.random((batch, lo.size))
         lpc = run.evaluate(target, cand)
+        n_tried, n_finite = n_tried + batch, n_finite + int(np.isfinite(lpc).sum())
         good = np.flatnonzero(np.isfinite(lpc))[: bad.size]
         theta[bad[: good.size]], lp[bad[: good.size]] = cand[good], lpc[good]
     bad = ~np.isfinite(lp)
     if bad.any() and not bad.all():
         src = rng.choice(np.flatnonzero(~bad), size=int(bad.sum()))
         theta[bad], lp[bad] = theta[src], lp[src]
-    return theta, lp
+    return (theta, lp, n_finite / n_tried) if return_fraction else (theta, lp)
 
 
 def space_filling(bounds: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:

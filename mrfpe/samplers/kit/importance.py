@@ -4,13 +4,21 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["THESIS_POWER", "partition_or_none", "softened"]
+__all__ = ["THESIS2_POWER", "THESIS_POWER", "partition_or_none", "softened"]
 
 #: Default softening power (5.69) of the thesis's algorithms (PMC (I)/(II), PPF, SIR
 #: 5.2.2). The thesis does not state its value; a prototype measured that with PMC (II)
 #: powers >= 0.03 collapse the cloud into bad regions and <= 0.01 leave it diffuse
 #: (issue 3), so the largest non-collapsing value.
 THESIS_POWER = 0.01
+
+#: Softening power of PMC (II) read as compounding (``PMC(variant="thesis2")``): on the
+#: ``pmc_convergence`` study's 100×100, 20-label Ward scenes, l = 1e-4 reproduces Table
+#: 7.1's fall of the MAP distance (30 scenes: 0.260 → 0.141, the thesis 0.286 → 0.104) and
+#: its weight variances (median 8.3e-6 → 1.3e-8, the thesis 3.6e-6 → 1.8e-8); l = 1e-3
+#: gives better MAPs but variances 100–1000× the thesis's
+#: (``docs/results/pmc_thesis2_readings/report.md``).
+THESIS2_POWER = 1e-4
 
 
 def softened(target: Any, power: float) -> Any:

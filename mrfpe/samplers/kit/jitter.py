@@ -115,7 +115,7 @@ def log_resampling_mixture(x_new: np.ndarray, source: np.ndarray, idx: np.ndarra
 
 #: :func:`covariance_kernel` defaults: scale on Silverman's factor, and the ESS fraction
 #: the weights are flattened to before estimating the cloud's covariance. Measured on
-#: 3-D and 10-D (AR(1) ρ = 0.7) Gaussians (tests/samplers/accuracy_table.py): scale 1 on
+#: 3-D and 10-D (AR(1) ρ = 0.7) Gaussians (benchmarks/bench_accuracy.py): scale 1 on
 #: the raw weights collapses in 10-D (PMC sd ratio 0.06–0.6); 1.5 with 0.1 gives
 #: 0.91–1.03 and a final ESS ~300 of 1000.
 KERNEL_SCALE = 1.5

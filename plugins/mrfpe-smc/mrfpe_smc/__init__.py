@@ -12,11 +12,12 @@ systematically, (3) makes random-walk Metropolis moves on π_β' with the cloud'
 covariance times s² (s steered towards ``target_acceptance``), as many as make a
 particle move at least once with probability ``mixing``.
 
-``attrs["log_evidence"]`` = log ∫ p dθ / vol(box), the product of the mean
-incremental weights (−inf when no particle finds the support; ``final_beta`` < 1
-if ``max_stages`` stopped the run). The final equally weighted cloud is the sample
-set; ``step`` indexes the stages (0: the uniform draw), with ``beta``,
-``acceptance`` and ``n_moves`` per step.
+``log_evidence`` = log(∫_box p / vol(box)) (mrfpe's convention,
+:mod:`mrfpe.samplers.kit.evidence`): the support's share of the box times the product
+of the stages' mean incremental weights. ``log_evidence_se`` sums the stages'
+delta-method variances as if independent, a lower bound on the true SE (the spread
+over 6 seeds on ``benchmarks/bench_accuracy.py``'s Gaussians is 1.5–3× it). The final
+equally weighted cloud is the sample set; ``beta``, ``acceptance``, ``n_moves`` per step.
 """
 
 from __future__ import annotations
@@ -118,12 +119,16 @@ class AdaptiveTemperingSMC(Sampler):
         run = kit.Run(target, None, progress=progress, callback=callback, desc=self.name)
         # Stage 0: uniform draws, redrawn where the target vanishes (π_0+ is uniform on the
         # support; up to 20 batches of N candidates).
-        x, lp = kit.draw_in_support(run, target, rng, n, b, max_draws=20 * n)
+        x, lp, share = kit.draw_in_support(run, target, rng, n, b, max_draws=20 * n,
+                                           return_fraction=True)
         finite = np.isfinite(lp)
         run.offer(x, lp)
         run.step(0, float(n), beta=0.0)
         trace = {"beta": [0.0], "acceptance": [np.nan], "n_moves": [0]}
-        log_z, beta, stage = 0.0, 0.0, 0
+        # log Z relative to the box: the support's share, then each stage's mean weight
+        log_z = math.log(share) if share > 0 else -math.inf
+        var_z = (1.0 - share) / (share * n) if share > 0 else math.inf
+        beta, stage = 0.0, 0
         log_scale, acc = math.log(2.38 / math.sqrt(d)), self.target_acceptance
         while finite.any() and beta < 1.0 and stage < self.max_stages:
             stage += 1
@@ -132,6 +137,7 @@ class AdaptiveTemperingSMC(Sampler):
                 inc = np.where(np.isfinite(lp), (new_beta - beta) * lp, -np.inf)
             log_z += float(logsumexp(inc) - math.log(n))
             stage_ess = kit.ess(inc)
+            var_z += (n / stage_ess - 1.0) / (n - 1)  # delta method, this stage alone
             idx = kit.resample(inc, n, "systematic", rng)
             x, lp, beta = x[idx], lp[idx], new_beta
 
@@ -156,6 +162,8 @@ class AdaptiveTemperingSMC(Sampler):
                 trace[key].append(v)
             run.step(stage, stage_ess, beta=beta, acceptance=acc, n_moves=k)
         extra = {key: (("step",), np.asarray(v)) for key, v in trace.items()}
-        attrs = {"log_evidence": log_z if finite.any() else -math.inf, "final_beta": beta}
+        ok = finite.any()
         return run.finish(x, lp, None, sampler=self.name, config=self.get_config(), seed=seed,
-                          extra_vars=extra, extra_attrs=attrs)
+                          log_evidence=log_z if ok else -math.inf,
+                          log_evidence_se=math.sqrt(var_z) if ok else math.nan,
+                          extra_vars=extra, extra_attrs={"final_beta": beta})

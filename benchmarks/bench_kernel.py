@@ -1,0 +1,318 @@
+"""Lean against classic kernel in one process (issue 14): ns/eval, speed of light, PMC, LM, growth.
+
+Everything is a **ratio in one run**: each comparison alternates the two
+kernels (``mrfpe.targets.dispatch.use_kernel``) and takes medians of several
+repeats, so a shared, noisy machine slows both alike.
+
+* ``ns/eval`` at N = 1000 (Ward and Phong, float32 and float64, 100 x 100, 20 labels)
+  for the classic and the lean kernel, wall and CPU per thread, and the lean
+  kernel's distance to the **speed of light**: ``22 vector ops per evaluation``
+  (the lean loop's count for Ward: 6 exp2 of ~15 ops, 4 slot terms of 4 ops, the
+  label log-sum-exp, per 6.2 evaluations) divided by the machine's vector-op rate.
+  The rate is measured (a numba loop of independent FMAs, per core, in the kernel's
+  own precision and vector width) and also given from nominal figures: vector width
+  from the ``avx512f`` flag in ``/proc/cpuinfo`` and LLVM's 256-bit preference
+  (:func:`mrfpe.threads.vector_width`), 2 FMA ports (Intel with AVX-512: 2 x 512
+  bit; AMD Zen 4: 2 x 256 bit, i.e. 512-bit ops at half rate), the clock from
+  ``cpu MHz``;
+* PMC 1000 x 20 on 100 x 100, 10 labels: today's code (classic kernel, NumPy
+  mixture density) against lean kernel + numba mixture density, in float32 and
+  float64, the MAP of both (same float type) and the run's peak memory;
+* ``lm_multiseed`` (50 x 50, 20 labels, 27 seeds): today's (classic kernel,
+  forward-difference Jacobian) against the lean kernel with the analytic Jacobian;
+* growth of the lean kernel's ns/eval over labels (10-40) and lattice size (50²-400²).
+
+Usage::
+
+    python -m benchmarks --only kernel
+    python -m benchmarks.bench_kernel --quick --no-write
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks._common import append_results, command_line, machine, peak_memory
+
+OPS_PER_EVAL = 22
+
+
+def _fma_kernel():
+    from numba import njit
+
+    from mrfpe.targets.kernels import _FM
+
+    @njit(fastmath=_FM, error_model="numpy")
+    def fma_rate(x, n, m, c):
+        # 16 dependent FMAs per element between one load and one store: the loop over
+        # elements vectorises (one array, no alias checks) and out-of-order execution
+        # overlaps the independent chains of successive vectors, so FMA throughput binds
+        for _ in range(n):
+            for p in range(x.shape[0]):
+                v = x[p]
+                v = v * m + c
+                v = v * m + c
+                v = v * m + c
+                v = v * m + c
+                v = v * m + c
+                v = v * m + c
+                v = v * m + c
+                v = v * m + c
+                v = v * m + c
+                v = v * m + c
+                v = v * m + c
+                v = v * m + c
+                v = v * m + c
+                v = v * m + c
+                v = v * m + c
+                v = v * m + c
+                x[p] = v
+        return x[0]
+
+    return fma_rate
+
+
+def speed_of_light(dtype: str) -> dict:
+    """Measured and nominal vector-op rates per core, and the resulting ns/eval floor."""
+    import os
+
+    from mrfpe.threads import vector_width
+
+    width = vector_width()
+    lanes = width // (8 * np.dtype(dtype).itemsize)
+    cpu = Path("/proc/cpuinfo").read_text() if Path("/proc/cpuinfo").exists() else ""
+    mhz = [float(line.split(":")[1]) for line in cpu.splitlines() if line.startswith("cpu MHz")]
+    ghz = (np.median(mhz) / 1000) if mhz else float("nan")
+    amd = "AuthenticAMD" in cpu or "AMD" in cpu.split("model name", 1)[-1][:80]
+    # FMA ports: 2; Zen 4 executes a 512-bit op as two 256-bit halves. The nominal
+    # clock is /proc/cpuinfo's (base under a hypervisor; boost clocks run faster, which
+    # the measured rate sees)
+    lane_ops_cycle = 2 * (lanes // 2 if (amd and width == 512) else lanes)
+    nominal = lane_ops_cycle * ghz  # lane-ops per ns per core
+    f = _fma_kernel()
+    x = np.ones(64 * lanes, dtype=dtype)
+    m, c = np.dtype(dtype).type(0.999), np.dtype(dtype).type(0.001)  # typed: no promotion
+    f(x, 10, m, c)
+    reps = 5000
+    ts = []
+    for _ in range(5):
+        t0 = time.perf_counter()
+        f(x, reps, m, c)
+        ts.append(time.perf_counter() - t0)
+    measured = 16 * x.size * reps / min(ts) / 1e9  # FMAs (lane-ops) per ns, one core
+    cores = os.cpu_count() or 1
+    return {"dtype": dtype, "vector_bits": width, "lanes": lanes, "ghz_nominal": ghz,
+            "lane_ops_ns_nominal": nominal, "lane_ops_ns_measured": measured, "cores": cores,
+            "sol_ns_eval_nominal": OPS_PER_EVAL / (nominal * cores),
+            "sol_ns_eval_measured": OPS_PER_EVAL / (measured * cores)}
+
+
+def _scene(brdf: str, shape, n_labels: int):
+    from mrfpe.synthetic import make_scene
+
+    theta = {"ward": [0.7, 0.4, 0.225], "phong": [0.5, 0.4, 7.5]}[brdf]
+    return make_scene(brdf=brdf, theta=theta, shape=shape, n_labels=n_labels,
+                      surface="smooth" if brdf == "ward" else "jagged", seed=0)
+
+
+def ns_per_eval(target, n: int, repeat: int, kernels=("classic", "lean")) -> dict:
+    """Median wall and CPU ns per BRDF evaluation of each kernel, alternated."""
+    import numba
+
+    from mrfpe.targets.dispatch import use_kernel
+
+    x = np.random.default_rng(0).random((n, target.ndim))
+    ev = target._tables.brdf_evals_per_particle * n
+    for k in kernels:
+        with use_kernel(k):
+            target.log_prob(x)
+    wall = {k: [] for k in kernels}
+    cpu = {k: [] for k in kernels}
+    for _ in range(repeat):
+        for k in kernels:
+            with use_kernel(k):
+                w0, c0 = time.perf_counter(), time.process_time()
+                target.log_prob(x)
+                wall[k].append(time.perf_counter() - w0)
+                cpu[k].append(time.process_time() - c0)
+    thr = numba.get_num_threads()
+    return {k: (np.median(wall[k]) / ev * 1e9, np.median(cpu[k]) / ev * 1e9 / thr)
+            for k in kernels}
+
+
+@contextmanager
+def _today(kernel: str):
+    """``"classic"``: today's code path (classic kernel, NumPy mixture density in PMC)."""
+    import mrfpe.samplers.pmc as pmc_mod
+    from mrfpe.mixture import log_mixture_density, log_mixture_density_numpy
+    from mrfpe.targets.dispatch import use_kernel
+
+    pmc_mod.log_mixture_density = (log_mixture_density_numpy if kernel == "classic"
+                                   else log_mixture_density)
+    try:
+        with use_kernel(kernel):
+            yield
+    finally:
+        pmc_mod.log_mixture_density = log_mixture_density
+
+
+def pmc_compare(shape, n_labels, dtype, n_samples, n_iter, repeat) -> dict:
+    """PMC today (classic kernel + NumPy mixture density) against lean + numba mixture."""
+    import mrfpe
+
+    t = mrfpe.targets.get("pls", _scene("ward", shape, n_labels), dtype=dtype)
+    out = {}
+    for k in ("classic", "lean"):
+        with _today(k):
+            mrfpe.sample("pmc", t, seed=0, n_samples=50, n_iterations=2)  # warm
+    times = {"classic": [], "lean": []}
+    for _ in range(repeat):
+        for k in ("classic", "lean"):
+            with _today(k), peak_memory() as mem:
+                t0 = time.perf_counter()
+                post = mrfpe.sample("pmc", t, seed=0, n_samples=n_samples, n_iterations=n_iter)
+                times[k].append(time.perf_counter() - t0)
+            out[k + "_map"] = post["map_theta"].values[-1]
+            out[k + "_rss"] = mem["rss_MiB"]
+            out[k + "_traced"] = mem["traced_MiB"]
+    out.update({k + "_s": float(np.median(v)) for k, v in times.items()})
+    return out
+
+
+def lm_compare(shape, n_labels, n_seeds, repeat) -> dict:
+    import mrfpe
+    from mrfpe.targets import jacobian
+    from mrfpe.targets.dispatch import use_kernel
+
+    t = mrfpe.targets.get("pls", _scene("ward", shape, n_labels))
+    orig = jacobian.supports
+    times = {"today": [], "new": []}
+    maps = {}
+    try:
+        for _ in range(repeat):
+            for k in ("today", "new"):
+                jacobian.supports = orig if k == "new" else (lambda target: False)
+                with use_kernel("lean" if k == "new" else "classic"):
+                    t0 = time.perf_counter()
+                    post = mrfpe.sample("lm_multiseed", t, seed=0, n_seeds=n_seeds)
+                    times[k].append(time.perf_counter() - t0)
+                maps[k] = post["map_theta"].values[-1]
+    finally:
+        jacobian.supports = orig
+    return {"today_s": float(np.median(times["today"])), "new_s": float(np.median(times["new"])),
+            "map_diff": float(np.max(np.abs(maps["today"] - maps["new"])))}
+
+
+def _mib(t) -> float:
+    from mrfpe.targets.lean import lean_tables
+
+    return (t.nbytes + lean_tables(t._tables, False).nbytes) / 2**20
+
+
+PARTS = ("nseval", "pmc", "lm", "growth")
+
+
+def run(quick: bool = False, parts: tuple[str, ...] = PARTS) -> list[str]:
+    """The markdown body of the suite (``parts``: which of :data:`PARTS` to run)."""
+    import mrfpe
+    from mrfpe.threads import configure_vector_width
+
+    shape = (30, 30) if quick else (100, 100)
+    rep = 2 if quick else 5
+    body = [f"Kernel vector width: {configure_vector_width()} (mrfpe.threads; `MRFPE_AVX512=0` "
+            "opts out). Ratios are lean ÷ classic in this process, medians of "
+            f"{rep} alternated repeats; `SoL` = {OPS_PER_EVAL} vector ops per evaluation at the "
+            "measured (nominal) vector-op rate of all cores.\n"]
+    rows = ["| brdf | dtype | classic ns/eval | lean ns/eval | lean ÷ classic | classic cpu/thr "
+            "| lean cpu/thr | cpu ratio | SoL measured | SoL nominal | lean ÷ SoL |",
+            "|---|---|---|---|---|---|---|---|---|---|---|"]
+    sol = {dt: speed_of_light(dt) for dt in ("float32", "float64")}
+    for brdf in ("ward", "phong") if "nseval" in parts else ():
+        scene = _scene(brdf, shape, 10 if quick else 20)
+        for dt in ("float32", "float64"):
+            t = mrfpe.targets.get("pls", scene, dtype=dt)
+            r = ns_per_eval(t, 1000 if not quick else 200, rep)
+            s = sol[dt]
+            rows.append(f"| {brdf} | {dt} | {r['classic'][0]:.3f} | {r['lean'][0]:.3f} | "
+                        f"{r['lean'][0] / r['classic'][0]:.2f} | {r['classic'][1]:.3f} | "
+                        f"{r['lean'][1]:.3f} | {r['lean'][1] / r['classic'][1]:.2f} | "
+                        f"{s['sol_ns_eval_measured']:.3f} | {s['sol_ns_eval_nominal']:.3f} | "
+                        f"{r['lean'][1] / s['sol_ns_eval_measured']:.1f} |")
+            print(rows[-1], flush=True)
+    if "nseval" in parts:
+        body += [*rows, ""]
+    for dt, s in sol.items():
+        body.append(f"- speed of light, {dt}: {s['vector_bits']}-bit vectors ({s['lanes']} lanes), "
+                    f"measured {s['lane_ops_ns_measured']:.1f} FMA lane-ops/ns/core (nominal "
+                    f"{s['lane_ops_ns_nominal']:.1f} at {s['ghz_nominal']:.2f} GHz), "
+                    f"{s['cores']} cores")
+    # PMC 1000 x 20, 10 labels
+    if "pmc" in parts:
+        body += ["", "| PMC | dtype | today s | lean s | lean ÷ today | MAP |lean − today| "
+                 "| peak RSS MiB today / lean | traced MiB today / lean |",
+                 "|---|---|---|---|---|---|---|---|"]
+    for dt in ("float32", "float64") if "pmc" in parts else ():
+        p = pmc_compare(shape, 10, dt, 200 if quick else 1000, 5 if quick else 20,
+                        1 if quick else 2)
+        d = float(np.max(np.abs(p["lean_map"] - p["classic_map"])))
+        body.append(f"| {200 if quick else 1000}x{5 if quick else 20} | {dt} | "
+                    f"{p['classic_s']:.2f} | {p['lean_s']:.2f} | {p['lean_s'] / p['classic_s']:.2f}"
+                    f" | {d:.4f} | {p['classic_rss']:.0f} / {p['lean_rss']:.0f} | "
+                    f"{p['classic_traced']:.0f} / {p['lean_traced']:.0f} |")
+        print(body[-1], flush=True)
+    if "lm" not in parts:
+        return body
+    # lm_multiseed
+    lm = lm_compare((20, 20) if quick else (50, 50), 10 if quick else 20, 4 if quick else 27, 1)
+    body += ["", f"- lm_multiseed ({'20x20, 10' if quick else '50x50, 20'} labels, "
+             f"{4 if quick else 27} seeds): today (classic kernel, forward differences) "
+             f"{lm['today_s']:.1f} s, lean + analytic Jacobian {lm['new_s']:.1f} s, ratio "
+             f"{lm['new_s'] / lm['today_s']:.2f}; MAP difference {lm['map_diff']:.2e}"]
+    print(body[-1], flush=True)
+    if "growth" not in parts:
+        return body
+    # growth (lean, float32)
+    labels = (10, 20) if quick else (10, 20, 30, 40)
+    sizes = ((20, 20), (40, 40)) if quick else ((50, 50), (100, 100), (200, 200), (400, 400))
+    g = ["", "| growth (lean, float32, N=200) | nodes | labels | ns/eval | log_prob ms | "
+         "tables MiB (classic + lean) |", "|---|---|---|---|---|---|"]
+    for B in labels:
+        t = mrfpe.targets.get("pls", _scene("ward", shape, B), dtype="float32")
+        r = ns_per_eval(t, 200, rep, ("lean",))["lean"]
+        g.append(f"| labels | {t._tables.n_nodes} | {B} | {r[0]:.3f} | "
+                 f"{r[0] * t._tables.brdf_evals_per_particle * 200 / 1e6:.1f} | "
+                 f"{_mib(t):.0f} |")
+        print(g[-1], flush=True)
+    for sh in sizes:
+        t = mrfpe.targets.get("pls", _scene("ward", sh, 20 if not quick else 10), dtype="float32")
+        r = ns_per_eval(t, 200, max(2, rep // 2), ("lean",))["lean"]
+        g.append(f"| lattice {sh[0]}² | {t._tables.n_nodes} | {20 if not quick else 10} | "
+                 f"{r[0]:.3f} | {r[0] * t._tables.brdf_evals_per_particle * 200 / 1e6:.1f} | "
+                 f"{_mib(t):.0f} |")
+        print(g[-1], flush=True)
+    body += g
+    return body
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p.add_argument("--quick", action="store_true")
+    p.add_argument("--no-write", action="store_true")
+    p.add_argument("--parts", nargs="+", choices=PARTS, default=list(PARTS))
+    args = p.parse_args(argv)
+    info = machine()
+    body = run(args.quick, tuple(args.parts))
+    if not args.no_write:
+        append_results("bench_kernel: lean vs classic (issue 14)" + (" (quick)" if args.quick
+                                                                    else ""),
+                       command_line(argv, "benchmarks.bench_kernel"), info, body)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

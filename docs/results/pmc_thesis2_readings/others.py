@@ -1,0 +1,97 @@
+"""The other thesis samplers on the same scenes: PMC (I), SIR alternative, PPF, R/Q-type DW.
+
+Brief check for issue 13, item 1: do PMC (I) (6.6.1, 6.66), the alternative
+SIR (5.2.2, 5.29-5.31), PPF (5.3, 5.32-5.35) and R/Q-type dynamically weighted
+MCMC (5.48, 5.49) with the literal initial weight Π₀ = ϱ(θ₀) (7.13,
+``initial_weight="absolute"``) behave as the thesis reports? Library samplers
+at their thesis settings, on the ``pmc_convergence`` Ward scenes of
+``readings.py``. One JSON row per (scene, sampler) in ``others.jsonl``.
+
+Usage::
+
+    NUMBA_NUM_THREADS=1 nice -n 10 python docs/results/pmc_thesis2_readings/others.py 0-2
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+import mrfpe
+
+HERE = Path(__file__).resolve().parent
+OUT = HERE / "others.jsonl"
+
+SAMPLERS = {
+    "pmc_thesis1": ("pmc", {"n_samples": 1000, "n_iterations": 20, "variant": "thesis1",
+                            "keep_history": True}),
+    "sir_alternative": ("sir", {"n_samples": 1000, "n_iterations": 20,
+                                "variant": "alternative", "keep_history": True}),
+    "ppf": ("ppf", {"n_samples": 1000, "n_partitions": 20, "k": 3, "keep_history": True}),
+    "dw_r_absolute": ("dw_r", {"n_steps": 20000, "initial_weight": "absolute"}),
+    "dw_q_absolute": ("dw_q", {"n_steps": 20000, "initial_weight": "absolute"}),
+    "dw_r_relative": ("dw_r", {"n_steps": 20000, "initial_weight": "relative"}),
+    # the literal Π₀ on the PL divided by the node count (log ϱ / |S|, via the softening)
+    "dw_r_absolute_per_node": ("dw_r", {"n_steps": 20000, "initial_weight": "absolute"}),
+    "dw_q_absolute_per_node": ("dw_q", {"n_steps": 20000, "initial_weight": "absolute"}),
+}
+
+
+def _readings():
+    spec = importlib.util.spec_from_file_location("readings", HERE / "readings.py")
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = mod
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def main(argv: list[str]) -> None:
+    """Run every sampler of :data:`SAMPLERS` on the scenes ``argv[0]`` (e.g. ``0-2``)."""
+    R = _readings()
+    scenes = R._ints(argv[0] if argv else "0-2")
+    names = argv[1].split(",") if len(argv) > 1 else list(SAMPLERS)
+    done = set()
+    if OUT.exists():
+        done = {(r["scene"], r["sampler"]) for r in map(json.loads, OUT.read_text().splitlines())}
+    for scene in scenes:
+        prob = None
+        _, s_runs = R.scene_seeds(scene)
+        for label in names:
+            if (scene, label) in done:
+                continue
+            prob = prob or R.make_scene(scene)
+            name, cfg = SAMPLERS[label]
+            target = prob.target
+            if label.endswith("_per_node"):
+                from mrfpe.targets.softening import softened
+
+                target = softened(target, 1.0 / target._tables.n_nodes)
+            t0 = time.perf_counter()
+            post = mrfpe.sample(name, target, seed=int(s_runs % 2**31), **cfg)
+            mt = post["map_theta"].values
+            d = np.linalg.norm(mt - prob.truth, axis=1)
+            row = {"scene": scene, "sampler": label, "config": cfg,
+                   "map_dist": d.tolist() if d.size <= 100 else [*d[::1000].tolist(), d[-1]],
+                   "ess": post["ess"].values.tolist() if post["ess"].size <= 100 else None,
+                   "final_map_lt": float(post["map_log_target"].values[-1]),
+                   "truth_lt": prob.truth_log_prob, "wall_s": time.perf_counter() - t0}
+            if "history_log_weight" in post:
+                row["weight_var"] = np.exp(post["history_log_weight"].values).var(axis=1).tolist()
+            if "acceptance" in post:
+                row["acceptance_mean"] = float(np.mean(post["acceptance"].values))
+            if "log_weight" in post:
+                lw = post["log_weight"].values
+                row["log_weight_range"] = [float(np.min(lw)), float(np.max(lw))]
+            with OUT.open("a") as fh:
+                fh.write(json.dumps(row) + "\n")
+            print(scene, label, f"{d[0]:.3f} -> {d[len(d) // 4]:.3f} -> {d[-1]:.3f}",
+                  f"({row['wall_s']:.0f}s)", flush=True)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])

@@ -1,0 +1,154 @@
+"""The lean kernel against today's (classic) kernel and the NumPy reference energies."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from numba import njit
+from scipy.special import logsumexp
+
+from mrfpe import brdf as B
+from mrfpe.synthetic import make_scene
+from mrfpe.targets import get, reflectance
+from mrfpe.targets.dispatch import kernel_for, use_kernel
+from mrfpe.targets.energy import energies_reference
+from mrfpe.targets.lean import block_size, fexp2, lean_tables
+
+CASES = [("ward", [0.7, 0.4, 0.45], "smooth"), ("phong", [0.5, 0.4, 0.3], "jagged"),
+         ("ward_aniso", [0.7, 0.4, 0.45, 0.3], "smooth"),
+         ("phong_aniso", [0.5, 0.4, 0.3, 0.5], "jagged"), ("lambertian", [0.7], "smooth")]
+
+
+@njit(error_model="numpy")
+def _map(x, out):
+    for i in range(x.shape[0]):
+        out[i] = fexp2(x[i])  # exp2_32 or exp2_64 by the argument's type
+
+
+def test_exp2_accuracy_and_underflow():
+    rng = np.random.default_rng(0)
+    x = np.concatenate([rng.uniform(-99, 0, 100_000), rng.uniform(-1, 1, 10_000), [0.0, -1.0]])
+    o = np.empty_like(x)
+    _map(x, o)
+    np.testing.assert_allclose(o, np.exp2(x), rtol=1.5e-15, atol=0)
+    x32 = x.astype(np.float32)
+    o32 = np.empty_like(x32)
+    _map(x32, o32)
+    np.testing.assert_allclose(o32, np.exp2(x32.astype(np.float64)), rtol=2.5e-7, atol=0)
+    low = np.array([-100.5, -1e4, -np.inf], dtype=np.float32)  # exactly 0: no denormals
+    ol = np.empty_like(low)
+    _map(low, ol)
+    np.testing.assert_array_equal(ol, 0.0)
+    low64 = np.array([-1000.5, -np.inf])
+    o64 = np.empty_like(low64)
+    _map(low64, o64)
+    np.testing.assert_array_equal(o64, 0.0)
+
+
+def _scene(brdf, u, surface, shape=(9, 11), n_labels=7, seed=3):
+    model = B.get(brdf)
+    return make_scene(brdf=brdf, theta=model.to_natural(np.array(u)), shape=shape,
+                      n_labels=n_labels, surface=surface, seed=seed)
+
+
+def _points(d, n=70, seed=0):
+    return np.random.default_rng(seed).random((n, d))
+
+
+@pytest.mark.parametrize("brdf,u,surface", CASES)
+@pytest.mark.parametrize("data_term", ["pixel", "triplet"])
+def test_float64_matches_classic_and_numpy_reference(brdf, u, surface, data_term):
+    s = _scene(brdf, u, surface)
+    x = np.vstack([_points(len(u)), np.array(u)])
+    for name in ("pls", "pml", "fit"):
+        t = get(name, s, data_term=data_term)
+        assert kernel_for(t._tables, brdf not in ("lambertian", "ward")) == "lean"
+        with use_kernel("classic"):
+            ref = t.node_terms(x)
+            ref_lp = t.log_prob(x)
+        new = t.node_terms(x)
+        # relative to the scale of the values (a noise-free fit at the truth is ~1e-13)
+        tol = 1e-12 * np.max(np.abs(ref_lp))
+        np.testing.assert_allclose(new, ref, rtol=1e-12, atol=1e-12 * np.max(np.abs(ref)))
+        np.testing.assert_allclose(t.log_prob(x), ref_lp, rtol=1e-12, atol=tol)
+        np.testing.assert_allclose(t.log_prob(x[:3]), ref_lp[:3], rtol=1e-12, atol=tol)
+    # independent route: plain-numpy energies of every (node, label)
+    t = get("pl", s, data_term=data_term)
+    coef = reflectance.coefficients(t.model, t.model.to_natural(x))
+    e = energies_reference(t._tables, coef, t.sigma_b)  # (N, n, B)
+    obs = t._obs
+    ell = -e[:, np.arange(obs.size), obs] - logsumexp(-e, axis=2)
+    np.testing.assert_allclose(t.node_terms(x), ell, rtol=1e-12, atol=1e-11)
+
+
+@pytest.mark.parametrize("brdf,u,surface", CASES[:2])
+def test_float32_within_2e6(brdf, u, surface):
+    s = _scene(brdf, u, surface, shape=(30, 30), n_labels=20, seed=2)
+    x = np.vstack([_points(3, 300), np.array(u)])
+    a = get("pls", s).log_prob(x)
+    t32 = get("pls", s, dtype="float32")
+    b = t32.log_prob(x)
+    np.testing.assert_allclose(b, a, rtol=2e-6)
+    # differences that matter for sampling: between points, relative to their size
+    d64, d32 = a[:, None] - a[None, :], b[:, None] - b[None, :]
+    assert np.max(np.abs(d32 - d64)) <= 2e-6 * np.max(np.abs(a))
+    with use_kernel("classic"):
+        c = t32.log_prob(x)
+    np.testing.assert_allclose(b, c, rtol=2e-6)
+    np.testing.assert_allclose(t32.log_prob(x[:2]), b[:2], rtol=1e-6)  # labels-SIMD kernel
+    np.testing.assert_allclose(sum(p.log_prob(x[:20]) for p in t32.partition(3)), b[:20],
+                               rtol=1e-12)
+
+
+def test_partitions_forbidden_labels_and_threads():
+    s = _scene("ward", [0.7, 0.4, 0.45], "smooth", shape=(12, 12), n_labels=6)
+    bel = np.ones((*s.lattice.node_shape, 6))
+    forbid = (s.observed_labels + 1) % 6  # one non-observed label per node: infinite energy
+    np.put_along_axis(bel, forbid[..., None], 0.0, axis=2)
+    t = get("pl3", s, beliefs=bel / bel.sum(axis=2, keepdims=True))
+    x = _points(3, 40)
+    with use_kernel("classic"):
+        ref = t.log_prob(x)
+    lp = t.log_prob(x)
+    assert np.all(np.isfinite(lp))
+    np.testing.assert_allclose(lp, ref, rtol=1e-12)
+    parts = t.partition(4, "block")
+    np.testing.assert_allclose(sum(p.log_prob(x) for p in parts), lp, rtol=1e-12)
+    import numba
+
+    from mrfpe.threads import limit_threads
+    with limit_threads(1):
+        one = t.log_prob(x)
+    with limit_threads(numba.config.NUMBA_NUM_THREADS):
+        assert np.array_equal(t.log_prob(x), one)  # fixed chunk order
+
+
+def test_tables_cached_and_template_fallback():
+    s = _scene("ward", [0.7, 0.4, 0.45], "smooth")
+    t = get("pls", s)
+    assert lean_tables(t._tables, False) is lean_tables(t._tables, False)
+    with pytest.raises(ValueError, match="kernel must be"):
+        with use_kernel("fast"):
+            pass
+    assert block_size(1000, 20, 4) % 16 == 0 and block_size(1, 40, 8) == 16
+
+
+def test_vector_width_opt_out_and_user_setting():
+    code = ("import mrfpe.targets.kernels, mrfpe.threads as t, numba; "
+            "print(t.configure_vector_width(), numba.config.CPU_FEATURES is None)")
+    env = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_CPU")}
+    out = subprocess.run([sys.executable, "-c", code], env={**env, "MRFPE_AVX512": "0"},
+                         capture_output=True, text=True, check=True).stdout.split()
+    assert out == ["opt-out", "True"]
+    out = subprocess.run([sys.executable, "-c", code], env={**env, "NUMBA_CPU_NAME": "generic"},
+                         capture_output=True, text=True, check=True).stdout.split()
+    assert out[0] == "user"
+    code2 = ("import numba; numba.njit(lambda x: x)(1); import mrfpe.targets.kernels, "
+             "mrfpe.threads as t; print(t.configure_vector_width())")
+    out = subprocess.run([sys.executable, "-c", code2], env=env, capture_output=True, text=True,
+                         check=True).stdout.split()
+    assert out == ["late"]  # numba already built its target machine: left alone

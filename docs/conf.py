@@ -45,7 +45,8 @@ extensions = [
 ]
 
 source_suffix = {".rst": "restructuredtext", ".md": "myst-nb"}
-exclude_patterns = ["_build", "results/**/trials", "**/.ipynb_checkpoints", "README.md"]
+exclude_patterns = ["_build", "results/**/trials", "**/.ipynb_checkpoints", "README.md",
+                    "results/*/tables*.md"]  # table fragments a report names, not pages
 templates_path = ["_templates"]
 suppress_warnings = ["config.cache"]  # autosummary_context holds functions
 html_static_path = ["_static"]
@@ -330,7 +331,21 @@ def _resolve_reexport(app, env, node, contnode):
                                node, contnode)
 
 
+# Per-page textual fixes of Markdown pages that are not ours to edit: (docname, old, new).
+_PAGE_FIXES = [
+    # A link to a folder of trial files (no page there): keep the name, drop the link.
+    ("results/README", "[`pmc_convergence/`](pmc_convergence/)", "`pmc_convergence/`"),
+]
+
+
+def _page_fixes(app, docname, source):  # noqa: ARG001
+    for target, old, new in _PAGE_FIXES:
+        if docname == target:
+            source[0] = source[0].replace(old, new)
+
+
 def setup(app):
+    app.connect("source-read", _page_fixes)
     app.connect("missing-reference", _resolve_reexport)
     app.connect("builder-inited", _write_shadowed, priority=900)  # after autosummary
     app.connect("autodoc-process-docstring", _raw_fixes, priority=100)  # before napoleon

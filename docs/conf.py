@@ -45,7 +45,8 @@ extensions = [
 ]
 
 source_suffix = {".rst": "restructuredtext", ".md": "myst-nb"}
-exclude_patterns = ["_build", "results/**/trials", "**/.ipynb_checkpoints", "README.md"]
+exclude_patterns = ["_build", "results/**/trials", "**/.ipynb_checkpoints", "README.md",
+                    "results/*/tables*.md"]  # table fragments a report names, not pages
 templates_path = ["_templates"]
 suppress_warnings = ["config.cache"]  # autosummary_context holds functions
 html_static_path = ["_static"]
@@ -82,6 +83,10 @@ nb_execution_in_temp = False
 autosummary_generate = True
 autosummary_ignore_module_all = False  # a module's public names are its __all__
 autosummary_imported_members = False
+# autosummary's recursive listing imports every submodule, and importing
+# ``mrfpe.__main__`` runs the CLI on Sphinx's own argv (an argparse usage error
+# in the log); it is mocked, and private, so it is never documented anyway.
+autosummary_mock_imports = ["mrfpe.__main__"]
 autodoc_default_options = {"member-order": "bysource"}
 autodoc_typehints = "description"
 autodoc_typehints_format = "short"
@@ -195,9 +200,11 @@ autosummary_context = {
 # -- docstring workarounds -------------------------------------------------------
 # The docstrings are numpy style but written for ``help()`` as much as for Sphinx:
 # plain-text math such as ``|z_j|`` or ``|Σ₂|`` reads as an reST substitution,
-# and ``x``× as an unterminated literal. The fixes below are applied to the text
-# autodoc hands to docutils only; the source docstrings are left to their owners
-# (each fix names its docstring in ``_DOCSTRING_FIXES``).
+# and ``x``× as an unterminated literal. ``_escape`` handles those everywhere, on
+# the text autodoc hands to docutils only. A docstring that is simply wrong for
+# numpydoc is fixed at its source; ``_DOCSTRING_FIXES`` holds only the fixes for
+# files other work is still editing (each names its docstring), to be moved to
+# the source when that work has merged.
 
 _LITERAL = re.compile(r"(``.+?``)")
 _CLOSE_OK = set(" \t-.,:;!?\\/'\")]}>")
@@ -205,12 +212,10 @@ _OPEN_OK = set(" \t-:/'\"([{<")
 
 # Per-object textual fixes of the raw docstring, before napoleon: (object, old, new).
 _DOCSTRING_FIXES = [
-    # Simple table: ``patrick_fisher`` runs into the column gap (first column is 17 wide).
-    ("mrfpe.distances.gaussian", "``patrick_fisher`` J_P", "patrick_fisher     J_P"),
-    # A paragraph after the Parameters section is read as more parameters.
-    ("mrfpe.geometry.ProjectiveCamera", "The centre is ``C", "Notes\n-----\nThe centre is ``C"),
-    # autosummary cuts the first sentence at ". " inside the literal.
-    ("mrfpe.shading.radiance", "max(n . l, 0)", "max(n·l, 0)"),
+    # A paragraph after the Parameters section is read as more parameters
+    # (mrfpe/posterior/ is being edited elsewhere; fix at the source later).
+    ("mrfpe.posterior.statistics.resample", "\n\nThe trace variables",
+     "\n\nNotes\n-----\nThe trace variables"),
 ]
 napoleon_custom_sections = [("Options", "params_style")]  # PL2 and friends
 
@@ -298,7 +303,50 @@ def _write_shadowed(app):
             path.write_text(text)
 
 
+def _resolve_reexport(app, env, node, contnode):
+    """Link ``mrfpe.posterior.diagnose`` to where it is documented.
+
+    A name is described once, in the module that defines it
+    (``mrfpe.posterior.diagnostics.diagnose``); a reference through a package
+    that re-exports it would otherwise render as plain text.
+    """
+    if node.get("refdomain") != "py" or not node.get("reftarget", "").startswith("mrfpe."):
+        return None
+    target = node["reftarget"]
+    modname, _, name = target.rpartition(".")
+    try:
+        obj = getattr(importlib.import_module(modname), name)
+    except (ImportError, AttributeError, ValueError):
+        return None
+    origin = _origin(obj)
+    home = f"{origin}.{obj.__qualname__}" if origin else None
+    if home is None or home == target:
+        home = f"{_homes().get((modname, name), modname)}.{name}"
+    if home == target:
+        return None
+    domain = env.get_domain("py")
+    if home not in domain.objects:
+        return None
+    return domain.resolve_xref(env, node["refdoc"], app.builder, node["reftype"], home,
+                               node, contnode)
+
+
+# Per-page textual fixes of Markdown pages that are not ours to edit: (docname, old, new).
+_PAGE_FIXES = [
+    # A link to a folder of trial files (no page there): keep the name, drop the link.
+    ("results/README", "[`pmc_convergence/`](pmc_convergence/)", "`pmc_convergence/`"),
+]
+
+
+def _page_fixes(app, docname, source):  # noqa: ARG001
+    for target, old, new in _PAGE_FIXES:
+        if docname == target:
+            source[0] = source[0].replace(old, new)
+
+
 def setup(app):
+    app.connect("source-read", _page_fixes)
+    app.connect("missing-reference", _resolve_reexport)
     app.connect("builder-inited", _write_shadowed, priority=900)  # after autosummary
     app.connect("autodoc-process-docstring", _raw_fixes, priority=100)  # before napoleon
     app.connect("autodoc-process-docstring", _escape, priority=900)  # after napoleon

@@ -247,6 +247,8 @@ class ProjectiveCamera:
     image_shape : (H, W) or None
         Size of the image this camera took, checked against a scene's image.
 
+    Notes
+    -----
     The centre is ``C = -M^-1 p4``; the ray through ``xy`` is ``C + r d`` with
     ``d = sign(det M) M^-1 (x, y, 1) / |.|`` (points in front of the camera, HZ 6.2.3),
     so range labels are distances from the camera centre (thesis 4.2.1, first

@@ -144,7 +144,7 @@ def radiance_from_features(model: Any, theta: Any, feats: np.ndarray,
 
 
 def radiance(model: Any, theta: Any, geom: TriangleGeometry) -> np.ndarray:
-    """Outgoing radiance (N, ...) of triangles: ``BRDF * E * max(n . l, 0)`` (4.17).
+    """Outgoing radiance (N, ...) of triangles: ``BRDF * E * max(n·l, 0)`` (4.17).
 
     ``theta`` is (N, d) (or (d,)) in natural units of ``model`` (name or instance).
     """

@@ -88,6 +88,8 @@ class Target:
         progress : bool
             Show a tqdm progress bar over the batch's chunks.
 
+        Notes
+        -----
         The batch is evaluated in chunks whose working memory stays below
         :data:`mrfpe.targets.budget.WORKING_CHUNK_BYTES`; a batch whose input,
         output and one chunk would exceed :func:`mrfpe.targets.memory_budget`

@@ -14,11 +14,12 @@ from __future__ import annotations
 
 import importlib.metadata as md
 import inspect
-import sys
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
+
+from mrfpe._caller import stacklevel_outside_mrfpe
 
 __all__ = ["PluginInfo", "Registry"]
 
@@ -57,14 +58,6 @@ def check_no_arg_constructible(obj: Any, name: str) -> None:
     if required:
         raise TypeError(f"{name}() must be constructible with no arguments; "
                         f"parameters without defaults: {', '.join(required)}")
-
-
-def _caller_outside_mrfpe() -> int:
-    """``stacklevel`` of the first frame outside mrfpe, so a warning names the user's line."""
-    level, frame = 1, sys._getframe(1)  # level 1: the function calling warnings.warn
-    while frame is not None and frame.f_globals.get("__name__", "").split(".")[0] == "mrfpe":
-        frame, level = frame.f_back, level + 1
-    return level
 
 
 class Registry:
@@ -133,7 +126,7 @@ class Registry:
             self._warned.add((key, info.error or ""))
             warnings.warn(f"{self.kind} plugin {key!r} ({info.target}, package {info.package}) "
                           f"failed to load and is left out: {info.error}", RuntimeWarning,
-                          stacklevel=_caller_outside_mrfpe())
+                          stacklevel=stacklevel_outside_mrfpe())
 
     def register(self, name: str, obj: Any) -> None:
         """Register ``obj`` in this process only (tests, notebooks)."""

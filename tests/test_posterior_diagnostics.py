@@ -134,3 +134,17 @@ def test_diagnostics_round_trip_through_netcdf(tmp_path):
     assert back.attrs["diag_reliable"] is True and back.attrs["diag_messages"] == []
     assert back.attrs["kind"] == "draws" and back.attrs["log_evidence"] == -1.25
     P.validate(back)
+
+
+def test_posterior_warning_points_at_the_callers_line():
+    """The warning names the user's call, not a line inside mrfpe (``_caller``)."""
+    import warnings
+
+    import mrfpe
+    from mrfpe.testing import CorrelatedGaussian
+
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        mrfpe.sample("pmc", CorrelatedGaussian(), seed=0, n_samples=20, n_iterations=2)
+    hits = [w for w in rec if issubclass(w.category, mrfpe.PosteriorWarning)]
+    assert hits and all(w.filename == __file__ for w in hits)

@@ -56,6 +56,7 @@ from typing import Any, ClassVar
 import numpy as np
 import xarray as xr
 
+from mrfpe._caller import stacklevel_outside_mrfpe
 from mrfpe.resampling import check_log_weights, normalise_log_weights
 from mrfpe.validation import check_bool
 
@@ -163,7 +164,7 @@ def as_sample_sets(posteriors: Sequence[Any], names: Sequence[str] | None = None
         warnings.warn(f"{', '.join(optima)} {'is' if len(optima) == 1 else 'are'} of "
                       "kind='optima' (a multi-start optimiser's optima, not posterior draws): "
                       "the distance compares sets of optima, not posteriors",
-                      PosteriorWarning, stacklevel=3)
+                      PosteriorWarning, stacklevel=stacklevel_outside_mrfpe())
     return out
 
 

@@ -56,6 +56,7 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
+from mrfpe._caller import stacklevel_outside_mrfpe
 from mrfpe.resampling import check_log_weights, ess, normalise_log_weights
 
 __all__ = [
@@ -350,9 +351,11 @@ def diagnostics_attrs(diag: dict[str, Any]) -> dict[str, Any]:
             "diag_messages": list(diag["messages"])}
 
 
-def warn_if_unreliable(diag: dict[str, Any], sampler: str, stacklevel: int = 3) -> None:
-    """One :class:`PosteriorWarning` listing every reason, for an unreliable set of draws."""
+def warn_if_unreliable(diag: dict[str, Any], sampler: str, stacklevel: int | None = None) -> None:
+    """One :class:`PosteriorWarning` listing every reason, for an unreliable set of draws
+    (pointing at the first caller outside mrfpe unless ``stacklevel`` is given)."""
     if diag["reliable"] or diag["kind"] == "optima":
         return
     warnings.warn(f"the posterior of {sampler} is unreliable: " + "; ".join(diag["messages"]),
-                  PosteriorWarning, stacklevel=stacklevel)
+                  PosteriorWarning,
+                  stacklevel=stacklevel if stacklevel is not None else stacklevel_outside_mrfpe())

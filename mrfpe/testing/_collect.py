@@ -25,3 +25,13 @@ def run_all(checks: dict[str, Any], what: str) -> dict[str, str]:
         raise AssertionError(f"{len(failures)} {what} check(s) failed:\n- "
                              + "\n- ".join(failures))
     return report
+
+
+def display_name(obj: Any) -> str:
+    """A checked object's ``name`` attribute, else its class name (for failure messages)."""
+    return getattr(obj, "name", "") or type(obj).__name__
+
+
+def failure(kind: str, obj: Any, check: str, msg: str) -> AssertionError:
+    """The ``AssertionError`` a check raises: ``"<check> failed for <kind> <name>: <msg>"``."""
+    return AssertionError(f"{check} failed for {kind} {display_name(obj)}: {msg}")

@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from mrfpe.testing._collect import run_all
+from mrfpe.testing._collect import display_name, failure, run_all
 
 __all__ = [
     "DISTANCE_CHECKS", "check_distance", "check_distance_finite", "check_distance_identity",
@@ -64,12 +64,11 @@ def _resolve(distance: Any) -> Any:
     return distance
 
 
-def _name(d: Any) -> str:
-    return getattr(d, "name", "") or type(d).__name__
+_name = display_name
 
 
 def _fail(d: Any, check: str, msg: str) -> AssertionError:
-    return AssertionError(f"{check} failed for distance {_name(d)}: {msg}")
+    return failure("distance", d, check, msg)
 
 
 def _post(theta: np.ndarray, log_weight: np.ndarray) -> xr.Dataset:

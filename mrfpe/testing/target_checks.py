@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from mrfpe.testing._collect import run_all
+from mrfpe.testing._collect import display_name, failure, run_all
 
 __all__ = [
     "TARGET_CHECKS", "check_target", "check_target_bad_input", "check_target_batch",
@@ -55,12 +55,11 @@ def _resolve(target_or_factory: Any) -> Any:
     return t
 
 
-def _name(t: Any) -> str:
-    return getattr(t, "name", "") or type(t).__name__
+_name = display_name
 
 
 def _fail(t: Any, check: str, msg: str) -> AssertionError:
-    return AssertionError(f"{check} failed for target {_name(t)}: {msg}")
+    return failure("target", t, check, msg)
 
 
 def _bounds(t: Any) -> np.ndarray:

@@ -337,6 +337,13 @@ def weight_variance(post: xr.Dataset) -> np.ndarray:
     return np.exp(lw).var(axis=1)
 
 
+def highest_weight(post: xr.Dataset) -> np.ndarray:
+    """(step, param) particle of largest weight at every stored iteration (7.4.1 step 6's MAP)."""
+    lw = post["history_log_weight"].values
+    top = np.argmax(np.where(np.isnan(lw), -np.inf, lw), axis=1)
+    return post["history_theta"].values[np.arange(lw.shape[0]), top]
+
+
 def first_reach(dist: np.ndarray, evals: np.ndarray, level: float) -> float:
     """Target evaluations when ``dist`` (per step) first falls to ``level`` (NaN if never)."""
     hit = np.flatnonzero(np.asarray(dist) <= level)

@@ -3,8 +3,9 @@
 :func:`pl_terms` takes the per-particle BRDF coefficients and a target's
 tables and returns the summed (or per-node) terms of the per-node formula of
 :mod:`mrfpe.targets.pseudolikelihood`. It picks the kernel
-(:mod:`mrfpe.targets.kernels`): the labels-as-SIMD kernel for a handful of
-particles (no padding), the particles-as-SIMD block kernel otherwise, and
+(:mod:`mrfpe.targets.kernels`): for a handful of particles (no padding) the
+nodes-as-SIMD kernel (lean) or the labels-as-SIMD one (classic), the
+particles-as-SIMD block kernel otherwise, and
 pads the batch to whole blocks. A new kernel is wired in here and nowhere else.
 
 Two kernel families compute the same terms: ``"lean"`` (default,
@@ -38,15 +39,17 @@ KERNELS = ("lean", "classic")
 KERNEL = "lean"
 
 
-_LOG2_UNARY: dict[int, np.ndarray] = {}
+_LOG2_UNARY: dict[tuple[int, bool], np.ndarray] = {}
 
 
-def _log2_units(unary: np.ndarray) -> np.ndarray:
-    """``unary * log2(e)``, rounded once from float64 and kept while ``unary`` lives."""
-    key = id(unary)
+def _log2_units(unary: np.ndarray, transposed: bool = False) -> np.ndarray:
+    """``unary * log2(e)`` (its (B, n) transpose if ``transposed``), rounded once from
+    float64 and kept while ``unary`` lives."""
+    key = (id(unary), transposed)
     hit = _LOG2_UNARY.get(key)
     if hit is None:
         hit = (unary.astype(np.float64) * LOG2E).astype(unary.dtype)
+        hit = np.ascontiguousarray(hit.T) if transposed else hit
         _LOG2_UNARY[key] = hit
         weakref.finalize(unary, _LOG2_UNARY.pop, key, None)
     return hit
@@ -73,7 +76,7 @@ def kernel_for(tables: DataTables, full: bool) -> str:
         return "lean"
     return "classic"
 
-#: Batches smaller than this run the labels-as-SIMD kernel (no padding of particles).
+#: Batches smaller than this run the small-batch kernels (no padding of particles).
 LABEL_KERNEL_BELOW = 5
 
 
@@ -109,8 +112,15 @@ def pl_terms(tables: DataTables, coef: np.ndarray, *, full: bool, unary: np.ndar
     labels_simd = N < LABEL_KERNEL_BELOW
     lean = kernel_for(t, full) == "lean"
     if lean:  # the lean kernels take the exponent coefficients in log2 units
-        coef = coef.copy()
-        coef[:, 3:] *= LOG2E
+        from mrfpe.targets.lean import HI32, HI64, exponent_bound, lean_tables
+
+        log2_coef = coef.copy()
+        log2_coef[:, 3:] *= LOG2E
+        # their exp2 skips the overflow clamp: an exponent that could exceed it (a model
+        # whose lobes grow, not decay) goes to the classic kernel
+        hi = HI32 if np.dtype(dtype) == np.float32 else HI64
+        lean = exponent_bound(lean_tables(t, full), log2_coef[:, 3:]) <= hi
+        coef = log2_coef if lean else coef
     if labels_simd:  # a few particles: the labels are the SIMD lanes, no padding
         npad = N
         bl = 0
@@ -134,16 +144,18 @@ def pl_terms(tables: DataTables, coef: np.ndarray, *, full: bool, unary: np.ndar
         out_chunk = np.zeros((n_chunks, npad))
         out_node = np.zeros((1, 1))
     if lean:
-        from mrfpe.targets.lean import lean_tables, lean_terms, lean_terms_labels
+        from mrfpe.targets.lean import lean_tables_t, lean_terms, lean_terms_nodes
 
         lt = lean_tables(t, full)
-        args = (lt.rec, lt.nrec, _log2_units(unary), obs, ft(inv_sigma * LOG2E), chunks, ft(a),
-                ft(b), b != 0, out_chunk, out_node, per_node)
+        rest = (obs, ft(inv_sigma * LOG2E), chunks, ft(a), ft(b), b != 0, out_chunk, out_node,
+                per_node)
         with thread_budget(N * t.brdf_evals_per_particle):
-            if labels_simd:
-                lean_terms_labels(coef_t, full, *args)
+            if labels_simd:  # the node-major tables: nodes are the SIMD lanes
+                ltt = lean_tables_t(lt)
+                lean_terms_nodes(coef_t, full, ltt.recT, ltt.nrecT,
+                                 _log2_units(unary, transposed=True), *rest)
             else:
-                lean_terms(coef_t, bl, full, *args)
+                lean_terms(coef_t, bl, full, lt.rec, lt.nrec, _log2_units(unary), *rest)
         return out_node[:, :N].T if per_node else out_chunk[:, :N].sum(axis=0)
     args = (t.slot_ptr, t.slot_y, t.slot_w, t.slot_nvar, t.fix_feat, t.var_ptr, t.var_feat,
             unary, obs, ft(inv_sigma), chunks, ft(a), ft(b), b != 0, out_chunk, out_node,

@@ -52,7 +52,7 @@ def _grad_labels(coef, full, rec, nrec, unary, obs, inv_sigma, chunk_ptr, a, b,
                  out_val, out_grad):  # pragma: no cover - compiled
     """Node terms ``out_val`` (n,) and ``dl/dc`` ``out_grad`` (n, 5) of one particle.
 
-    Arguments as :func:`mrfpe.targets.lean.lean_terms_labels` (``unary`` and
+    Arguments as :func:`mrfpe.targets.lean.lean_terms` without the block (``unary`` and
     ``inv_sigma`` in log2 units, ``coef`` (5,) float64 with ``e1, e2`` times
     log2 e); float64 whatever the tables' precision; a node's labels are the
     loop of a straight-line body, as in the value kernel.

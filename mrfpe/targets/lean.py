@@ -19,16 +19,19 @@ log sum_s exp(-E_i(s))``), with the pixel data term's structure baked in:
   four), so the tables do not depend on ``sigma_b`` or the unary energies and are
   cached on the :class:`~mrfpe.targets.energy.DataTables` they come from.
 * **exp.** :func:`exp2_32` / :func:`exp2_64`: ``2^x`` by rounding ``x`` with the
-  1.5 * 2^23 (2^52) trick and a degree-6 (degree-10) polynomial for ``2^r``,
-  ``|r| <= 1/2``; the per-particle exponents are pre-multiplied by log2(e).
-  Results below ``2^-100`` (``2^-1000``) are exactly 0: no denormals downstream.
+  1.5 * 2^23 (2^52) trick and a degree-5 (degree-10) polynomial for ``2^r``,
+  ``|r| <= 1/2``, scaled by an integer add to its exponent bits; the per-particle
+  exponents are pre-multiplied by log2(e). Below ``2^-64`` (``2^-512``) the result
+  is ``2^-64`` (``2^-512``): no denormals downstream, no clamp-and-select; there is
+  no overflow clamp either, so :func:`~mrfpe.targets.dispatch.pl_terms` sends
+  particles whose exponents could exceed 127 (1023) to the classic kernel.
 
 Layout (:class:`LeanTables`): ``rec[i, k, s]`` -- field ``k`` of node ``i`` at label
-``s``, labels contiguous so that the labels-as-SIMD kernel loads vectors and the
-particles-as-SIMD kernel loads scalars that stay in L1 -- fields ``A_0..A_3``, then
-per template triangle ``t = 0..5``: ``wF1, G1`` (and ``wF2, G2`` for the full
-form); ``nrec[i, k]``: ``y_0..y_3``, then the two fixed triangles' ``wF1, G1
-(, wF2, G2)`` (positions 2 and 3).
+``s``, labels contiguous so that the particles-as-SIMD kernel loads scalars that
+stay in L1 (:class:`LeanTablesT`: the node-major copy, for a few particles) --
+fields ``A_0..A_3``, then per template triangle ``t = 0..5``: ``wF1, G1`` (and
+``wF2, G2`` for the full form); ``nrec[i, k]``: ``y_0..y_3``, then the two fixed
+triangles' ``wF1, G1 (, wF2, G2)`` (positions 2 and 3).
 
 Numba compiles these kernels for the host's widest vectors (512-bit with
 AVX-512; :func:`mrfpe.threads.configure_vector_width`, called by
@@ -47,21 +50,22 @@ from numba.extending import overload
 from mrfpe.targets.energy import DataTables
 from mrfpe.targets.kernels import _FM, _f32_as_i32, _f64_as_i64, _i32_as_f32, _i64_as_f64, flog
 
-__all__ = ["LOG2E", "LeanTables", "block_size", "exp2_32", "exp2_64", "fexp2", "lean_tables",
-           "lean_terms", "lean_terms_labels"]
+__all__ = ["HI32", "HI64", "LOG2E", "NODE_BLOCK", "LeanTables", "LeanTablesT", "block_size",
+           "exp2_32", "exp2_64", "exponent_bound", "fexp2", "lean_tables", "lean_tables_t",
+           "lean_terms", "lean_terms_nodes"]
 
 LOG2E = 1.4426950408889634
 _LN2 = 0.6931471805599453
 _F32 = np.float32
-# 2^r on [-1/2, 1/2], degree 6, near-minimax in relative error (1.9e-9, Lawson's iteration
-# on weighted least squares). Degree 5 (7.5e-8) is one FMA cheaper, but its error has a
-# sign that persists over the range and so adds up over a lattice: 2.4e-6 relative in
-# log_prob at a noise-free maximum, against 1.1e-6 for the classic kernel.
-_A0, _A1, _A2 = _F32(1.0000000005541656), _F32(0.6931472057372645), _F32(0.2402264689062739)
-_A3, _A4 = _F32(0.055503287769708774), _F32(0.009618488957852861)
-_A5, _A6 = _F32(0.001339993121726021), _F32(0.00015345811800001227)
+# 2^r on [-1/2, 1/2], degree 5, c0 = 1 exactly: near-minimax in relative error (Lawson's
+# iteration), c2 then nudged so that the error *as evaluated in float32* has zero mean
+# (-3e-10; max 2.1e-7). Degree 5 is as accurate as float32 rounding, but the minimax
+# polynomial's c0 = 1.00000007 rounds up to 1 + 2^-23 in float32 and biases every value by
+# +5e-8, which adds up over a lattice (2.4e-6 relative in log_prob at a noise-free maximum).
+_A0, _A1, _A2 = _F32(1.0), _F32(0.6931470036506653), _F32(0.24022264778614044)
+_A3, _A4, _A5 = _F32(0.05550733581185341), _F32(0.009671509265899658), _F32(0.0013264708686619997)
 _MAGIC32 = _F32(12582912.0)  # 1.5 * 2^23
-_LO32, _HI32, _ZERO32 = _F32(-126.0), _F32(127.0), _F32(-100.0)
+_LO32, HI32 = _F32(-64.0), 127.0
 # 2^r on [-1/2, 1/2], degree 10: Chebyshev interpolation (near-minimax), relative error 1.1e-15.
 _B0, _B1, _B2 = 1.0000000000000004, 0.6931471805599518, 0.24022650695907977
 _B3 = 0.055504108664445426
@@ -69,34 +73,44 @@ _B4, _B5, _B6 = 0.00961812910829982, 0.0013333558228510879, 0.000154035296564373
 _B7, _B8, _B9, _B10 = (1.5252657855294864e-05, 1.3215796261250824e-06, 1.0208689179691987e-07,
                        7.0180311126213455e-09)
 _MAGIC64 = 6755399441055744.0  # 1.5 * 2^52
-_LO64, _HI64, _ZERO64 = -1022.0, 1023.0, -1000.0
+_LO64, HI64 = -512.0, 1023.0
 
 
 @njit(inline="always", fastmath=_FM, error_model="numpy", cache=True)
 def exp2_32(x):
-    """``2^x`` for float32, branch-free; exactly 0 below ``2^-100`` (relative error 2e-7)."""
-    xc = min(max(x, _LO32), _HI32)
+    """``2^x`` for float32 and ``x <= 127``, branch-free; ``2^-64`` below ``2^-64``.
+
+    Relative error 2.1e-7 (mean 0) on ``[-64, 127]``. The floor stands for values
+    that are zero to every sum the kernels form (a label's weight beside the
+    minimum's ``1``, a lobe beside its slot's Lambertian part) and keeps products
+    with the tables far from denormals. Rounding by adding ``1.5 * 2^23`` leaves
+    ``k = round(x)`` in the low mantissa bits, so ``k << 23`` added to the bits of
+    ``p = 2^(x - k)`` scales it: an integer add where a multiply would need an FMA
+    port. Callers guarantee ``x <= 127`` (:func:`exponent_bound`; the label
+    log-sum-exp's arguments are ``<= 0``).
+    """
+    xc = max(x, _LO32)
     t = xc + _MAGIC32
-    k = t - _MAGIC32  # round(xc); no 'reassoc' flag, so LLVM keeps the trick
-    r = xc - k
-    p = _A6
-    p = p * r + _A5
+    r = xc - (t - _MAGIC32)  # t - MAGIC = round(xc); no 'reassoc' flag, LLVM keeps the trick
+    p = _A5
     p = p * r + _A4
     p = p * r + _A3
     p = p * r + _A2
     p = p * r + _A1
     p = p * r + _A0
-    y = p * _i32_as_f32((_f32_as_i32(t) + np.int32(127)) << np.int32(23))
-    return y * _F32(x >= _ZERO32)
+    return _i32_as_f32(_f32_as_i32(p) + (_f32_as_i32(t) << np.int32(23)))
 
 
 @njit(inline="always", fastmath=_FM, error_model="numpy", cache=True)
 def exp2_64(x):
-    """``2^x`` for float64, branch-free; exactly 0 below ``2^-1000`` (relative error 1.2e-15)."""
-    xc = min(max(x, _LO64), _HI64)
+    """``2^x`` for float64 and ``x <= 1023``, branch-free; ``2^-512`` below ``2^-512``.
+
+    Relative error 1.2e-15 on ``[-512, 1023]``; as :func:`exp2_32` with ``1.5 * 2^52``
+    and a degree-10 polynomial.
+    """
+    xc = max(x, _LO64)
     t = xc + _MAGIC64
-    k = t - _MAGIC64
-    r = xc - k
+    r = xc - (t - _MAGIC64)
     p = _B10
     p = p * r + _B9
     p = p * r + _B8
@@ -108,8 +122,7 @@ def exp2_64(x):
     p = p * r + _B2
     p = p * r + _B1
     p = p * r + _B0
-    y = p * _i64_as_f64((_f64_as_i64(t) + 1023) << 52)
-    return y * np.float64(x >= _ZERO64)
+    return _i64_as_f64(_f64_as_i64(p) + (_f64_as_i64(t) << 52))
 
 
 def fexp2(x):  # pragma: no cover - replaced by the overload inside jitted code
@@ -139,6 +152,7 @@ class LeanTables:
     rec: np.ndarray   # (n, 4 + 6 * nf, B)
     nrec: np.ndarray  # (n, 4 + 2 * nf)
     full: bool
+    g_range: np.ndarray  # (2, 2): min and max of G1 and G2 over every triangle (0 if absent)
 
     @property
     def nbytes(self) -> int:
@@ -155,7 +169,7 @@ def _pack(t: DataTables, full: bool) -> LeanTables | None:
     nslot = np.diff(t.slot_ptr)
     nvar = t.slot_nvar
     if nvar.size == 0:
-        return LeanTables(rec.astype(ft), nrec.astype(ft), full)
+        return LeanTables(rec.astype(ft), nrec.astype(ft), full, np.zeros((2, 2)))
     if nslot.max() > N_POS or nvar.min() < 1 or nvar.max() > 2:
         return None
     node = np.repeat(np.arange(n, dtype=np.int64), nslot)
@@ -196,8 +210,22 @@ def _pack(t: DataTables, full: bool) -> LeanTables | None:
         nrec[node[in_fixed], N_POS + nf * (pos[in_fixed] - 2) + q] = v[in_fixed]
         # a single slot in a two-triangle position: its fixed triangle repeated per label
         rec[node[in_double], N_POS + nf * (2 * pos[in_double] + 1) + q] = v[in_double, None]
-    return LeanTables(np.ascontiguousarray(rec.astype(ft)), np.ascontiguousarray(nrec.astype(ft)),
-                      full)
+    rec, nrec = rec.astype(ft), nrec.astype(ft)
+    g_range = np.zeros((2, 2))
+    for q in range(nf // 2):  # the G fields: N_POS + nf * triangle + 2 q + 1 in rec and nrec
+        k = N_POS + 2 * q + 1
+        g = np.concatenate([rec[:, k::nf].ravel(), nrec[:, k::nf].ravel()])
+        g_range[q] = g.min(), g.max()
+    return LeanTables(np.ascontiguousarray(rec), np.ascontiguousarray(nrec), full, g_range)
+
+
+def exponent_bound(lt: LeanTables, e: np.ndarray) -> float:
+    """Largest exponent ``E1 G1 + E2 G2`` (log2 units) the kernels can meet for the
+    particles' exponent coefficients ``e`` ((N, 2), log2 units): :func:`exp2_32` and
+    :func:`exp2_64` need it below :data:`HI32` / :data:`HI64`."""
+    e = np.asarray(e, dtype=np.float64)
+    lo, hi = lt.g_range[:, 0], lt.g_range[:, 1]
+    return float(np.max(np.maximum(e * lo, e * hi).sum(axis=1), initial=-np.inf))
 
 
 def lean_tables(t: DataTables, full: bool) -> LeanTables | None:
@@ -385,87 +413,161 @@ def lean_terms(coef, bl, full, rec, nrec, unary, obs, inv_sigma, chunk_ptr, a, b
                     out_chunk[c, q0 + p] = acc[p]
 
 
-@njit(parallel=True, fastmath=_FM, error_model="numpy", cache=True)
-def lean_terms_labels(coef, full, rec, nrec, unary, obs, inv_sigma, chunk_ptr, a, b,
-                      do_lse, out_chunk, out_node, per_node):  # pragma: no cover - compiled
-    """As :func:`lean_terms` with a node's labels as the SIMD lanes (a few particles).
+# -- a few particles: the nodes are the SIMD lanes ------------------------------------------
 
-    ``coef`` is (5, N) without padding. Same formula and order of operations per
-    (particle, node, label) as :func:`lean_terms`.
+#: Nodes per block of :func:`lean_terms_nodes`: the block's (labels x nodes) energies in L1.
+NODE_BLOCK = 256
+
+
+@dataclass(frozen=True)
+class LeanTablesT:
+    """:class:`LeanTables` with the nodes last (``recT[k, s, i]``, ``nrecT[k, i]``), so that a
+    node block's field loads are contiguous vectors (:func:`lean_terms_nodes`)."""
+
+    recT: np.ndarray   # (4 + 6 * nf, B, n)
+    nrecT: np.ndarray  # (4 + 2 * nf, n)
+
+    @property
+    def nbytes(self) -> int:
+        return int(self.recT.nbytes + self.nrecT.nbytes)
+
+
+def lean_tables_t(lt: LeanTables) -> LeanTablesT:
+    """The node-major copy of ``lt`` (built on the first small batch and kept on ``lt``)."""
+    cache = lt.__dict__
+    if "_t" not in cache:
+        object.__setattr__(lt, "_t", LeanTablesT(np.ascontiguousarray(lt.rec.transpose(1, 2, 0)),
+                                                 np.ascontiguousarray(lt.nrec.T)))
+    return cache["_t"]
+
+
+@njit(parallel=True, fastmath=_FM, error_model="numpy", cache=True)
+def lean_terms_nodes(coef, full, recT, nrecT, unaryT, obs, inv_sigma, chunk_ptr, a, b,
+                     do_lse, out_chunk, out_node, per_node):  # pragma: no cover - compiled
+    """As :func:`lean_terms` for a few particles, with blocks of :data:`NODE_BLOCK` nodes as
+    the SIMD lanes, whatever the label count.
+
+    ``coef`` is (5, N) without padding; ``recT``, ``nrecT``: :class:`LeanTablesT`;
+    ``unaryT``: (B, n) in log2 units. Same formula and order of operations per
+    (particle, node, label) as :func:`lean_terms`; the node terms are then summed per
+    chunk in node order, as there, so the sums do not depend on the block size. The
+    fields are bound to 1-D rows (``recT[k, s]``) so that numba's code knows their unit
+    stride and loads vectors, not gathers, and indexed from 0 so that no
+    negative-index wraparound is compiled in.
     """
-    n_chunks = chunk_ptr.shape[0] - 1
     N = coef.shape[1]
     af = float(a)  # the node terms are combined in float64
     bf = float(b)
-    B = unary.shape[1]
-    zero = coef[0, 0] * 0
-    for c in prange(n_chunks):
-        en = np.empty(B, dtype=coef.dtype)
-        tmp = np.empty(B, dtype=coef.dtype)
+    B = unaryT.shape[0]
+    NB = NODE_BLOCK
+    lo, hi = chunk_ptr[0], chunk_ptr[-1]
+    vals = out_node if per_node else np.empty((hi, N))
+    for blk in prange(-(-(hi - lo) // NB)):
+        i0 = lo + blk * NB
+        i1 = min(i0 + NB, hi)
+        en = np.empty((B, NB), dtype=coef.dtype)
+        fa1 = np.empty(NB, dtype=coef.dtype)
+        fa2 = np.empty(NB, dtype=coef.dtype)
+        fb1 = np.empty(NB, dtype=coef.dtype)
+        fb2 = np.empty(NB, dtype=coef.dtype)
+        mn = np.empty(NB, dtype=coef.dtype)
+        ssum = np.empty(NB, dtype=coef.dtype)
+        m = i1 - i0
+        sl = slice(i0, i1)
+        y0, y1, y2, y3 = nrecT[0, sl], nrecT[1, sl], nrecT[2, sl], nrecT[3, sl]
         for q in range(N):
             C0 = coef[0, q]
             C1 = coef[1, q]
             C2 = coef[2, q]
             E1 = coef[3, q]
             E2 = coef[4, q]
-            acc = 0.0
-            for i in range(chunk_ptr[c], chunk_ptr[c + 1]):
-                y0 = nrec[i, 0]
-                y1 = nrec[i, 1]
-                y2 = nrec[i, 2]
-                y3 = nrec[i, 3]
-                r = rec[i]
-                ui = unary[i]
-                if full:
-                    xa = fexp2(E1 * nrec[i, 5] + E2 * nrec[i, 7])
-                    xb = fexp2(E1 * nrec[i, 9] + E2 * nrec[i, 11])
-                    fa1 = nrec[i, 4] * xa
-                    fa2 = nrec[i, 6] * xa
-                    fb1 = nrec[i, 8] * xb
-                    fb2 = nrec[i, 10] * xb
-                    for s in range(B):
-                        x0 = fexp2(E1 * r[5, s] + E2 * r[7, s])
-                        x1 = fexp2(E1 * r[9, s] + E2 * r[11, s])
-                        x2 = fexp2(E1 * r[13, s] + E2 * r[15, s])
-                        x3 = fexp2(E1 * r[17, s] + E2 * r[19, s])
-                        x4 = fexp2(E1 * r[21, s] + E2 * r[23, s])
-                        x5 = fexp2(E1 * r[25, s] + E2 * r[27, s])
-                        d = abs(y0 - C0 * r[0, s] - C1 * (r[4, s] * x0 + r[8, s] * x1)
-                                - C2 * (r[6, s] * x0 + r[10, s] * x1))
-                        d += abs(y1 - C0 * r[1, s] - C1 * (r[12, s] * x2 + r[16, s] * x3)
-                                 - C2 * (r[14, s] * x2 + r[18, s] * x3))
-                        d += abs(y2 - C0 * r[2, s] - C1 * (fa1 + r[20, s] * x4)
-                                 - C2 * (fa2 + r[22, s] * x4))
-                        d += abs(y3 - C0 * r[3, s] - C1 * (fb1 + r[24, s] * x5)
-                                 - C2 * (fb2 + r[26, s] * x5))
-                        en[s] = ui[s] + inv_sigma * d
-                else:
-                    fa1 = nrec[i, 4] * fexp2(E1 * nrec[i, 5])
-                    fb1 = nrec[i, 6] * fexp2(E1 * nrec[i, 7])
-                    for s in range(B):
-                        d = abs(y0 - C0 * r[0, s] - C1 * (r[4, s] * fexp2(E1 * r[5, s])
-                                                          + r[6, s] * fexp2(E1 * r[7, s])))
-                        d += abs(y1 - C0 * r[1, s] - C1 * (r[8, s] * fexp2(E1 * r[9, s])
-                                                           + r[10, s] * fexp2(E1 * r[11, s])))
-                        d += abs(y2 - C0 * r[2, s] - C1 * (fa1 + r[12, s] * fexp2(E1 * r[13, s])))
-                        d += abs(y3 - C0 * r[3, s] - C1 * (fb1 + r[14, s] * fexp2(E1 * r[15, s])))
-                        en[s] = ui[s] + inv_sigma * d
-                eo = en[obs[i]]
+            if full:
+                ha1, ga1, ha2, ga2 = nrecT[4, sl], nrecT[5, sl], nrecT[6, sl], nrecT[7, sl]
+                hb1, gb1, hb2, gb2 = nrecT[8, sl], nrecT[9, sl], nrecT[10, sl], nrecT[11, sl]
+                for j in range(m):  # fixed triangles: once per node, not per label
+                    xa = fexp2(E1 * ga1[j] + E2 * ga2[j])
+                    xb = fexp2(E1 * gb1[j] + E2 * gb2[j])
+                    fa1[j] = ha1[j] * xa
+                    fa2[j] = ha2[j] * xa
+                    fb1[j] = hb1[j] * xb
+                    fb2[j] = hb2[j] * xb
+                for s in range(B):
+                    u = unaryT[s, sl]
+                    a0, a1, a2, a3 = recT[0, s, sl], recT[1, s, sl], recT[2, s, sl], recT[3, s, sl]
+                    f01, g01 = recT[4, s, sl], recT[5, s, sl]
+                    f02, g02 = recT[6, s, sl], recT[7, s, sl]
+                    f11, g11 = recT[8, s, sl], recT[9, s, sl]
+                    f12, g12 = recT[10, s, sl], recT[11, s, sl]
+                    f21, g21 = recT[12, s, sl], recT[13, s, sl]
+                    f22, g22 = recT[14, s, sl], recT[15, s, sl]
+                    f31, g31 = recT[16, s, sl], recT[17, s, sl]
+                    f32, g32 = recT[18, s, sl], recT[19, s, sl]
+                    f41, g41 = recT[20, s, sl], recT[21, s, sl]
+                    f42, g42 = recT[22, s, sl], recT[23, s, sl]
+                    f51, g51 = recT[24, s, sl], recT[25, s, sl]
+                    f52, g52 = recT[26, s, sl], recT[27, s, sl]
+                    es = en[s]
+                    for j in range(m):
+                        x0 = fexp2(E1 * g01[j] + E2 * g02[j])
+                        x1 = fexp2(E1 * g11[j] + E2 * g12[j])
+                        x2 = fexp2(E1 * g21[j] + E2 * g22[j])
+                        x3 = fexp2(E1 * g31[j] + E2 * g32[j])
+                        x4 = fexp2(E1 * g41[j] + E2 * g42[j])
+                        x5 = fexp2(E1 * g51[j] + E2 * g52[j])
+                        d = abs(y0[j] - C0 * a0[j] - C1 * (f01[j] * x0 + f11[j] * x1)
+                                - C2 * (f02[j] * x0 + f12[j] * x1))
+                        d += abs(y1[j] - C0 * a1[j] - C1 * (f21[j] * x2 + f31[j] * x3)
+                                 - C2 * (f22[j] * x2 + f32[j] * x3))
+                        d += abs(y2[j] - C0 * a2[j] - C1 * (fa1[j] + f41[j] * x4)
+                                 - C2 * (fa2[j] + f42[j] * x4))
+                        d += abs(y3[j] - C0 * a3[j] - C1 * (fb1[j] + f51[j] * x5)
+                                 - C2 * (fb2[j] + f52[j] * x5))
+                        es[j] = u[j] + inv_sigma * d
+            else:
+                ha1, ga1, hb1, gb1 = nrecT[4, sl], nrecT[5, sl], nrecT[6, sl], nrecT[7, sl]
+                for j in range(m):
+                    fa1[j] = ha1[j] * fexp2(E1 * ga1[j])
+                    fb1[j] = hb1[j] * fexp2(E1 * gb1[j])
+                for s in range(B):
+                    u = unaryT[s, sl]
+                    a0, a1, a2, a3 = recT[0, s, sl], recT[1, s, sl], recT[2, s, sl], recT[3, s, sl]
+                    f0, g0, f1, g1 = recT[4, s, sl], recT[5, s, sl], recT[6, s, sl], recT[7, s, sl]
+                    f2, g2 = recT[8, s, sl], recT[9, s, sl]
+                    f3, g3 = recT[10, s, sl], recT[11, s, sl]
+                    f4, g4 = recT[12, s, sl], recT[13, s, sl]
+                    f5, g5 = recT[14, s, sl], recT[15, s, sl]
+                    es = en[s]
+                    for j in range(m):
+                        d = abs(y0[j] - C0 * a0[j]
+                                - C1 * (f0[j] * fexp2(E1 * g0[j]) + f1[j] * fexp2(E1 * g1[j])))
+                        d += abs(y1[j] - C0 * a1[j]
+                                 - C1 * (f2[j] * fexp2(E1 * g2[j]) + f3[j] * fexp2(E1 * g3[j])))
+                        d += abs(y2[j] - C0 * a2[j] - C1 * (fa1[j] + f4[j] * fexp2(E1 * g4[j])))
+                        d += abs(y3[j] - C0 * a3[j] - C1 * (fb1[j] + f5[j] * fexp2(E1 * g5[j])))
+                        es[j] = u[j] + inv_sigma * d
+            if do_lse:
+                for j in range(m):
+                    mn[j] = en[0, j]
+                    ssum[j] = 0
+                for s in range(1, B):
+                    es = en[s]
+                    for j in range(m):
+                        mn[j] = min(mn[j], es[j])
+                for s in range(B):
+                    es = en[s]
+                    for j in range(m):
+                        ssum[j] += fexp2(mn[j] - es[j])  # energies in log2 units
+            for j in range(m):
+                eo = en[obs[i0 + j], j]
                 if do_lse:
-                    m = en[0]
-                    for s in range(1, B):
-                        m = min(m, en[s])
-                    for s in range(B):
-                        tmp[s] = fexp2(m - en[s])
-                    ssum = zero
-                    for s in range(B):
-                        ssum += tmp[s]
-                    val = _LN2 * (af * -float(eo) - bf * float(m)) + bf * float(flog(ssum))
+                    vals[i0 + j, q] = _LN2 * (af * -float(eo) - bf * float(mn[j])) + bf * float(
+                        flog(ssum[j]))
                 else:
-                    val = _LN2 * (af * -float(eo))
-                if per_node:
-                    out_node[i, q] = val
-                else:
-                    acc += val
-            if not per_node:
+                    vals[i0 + j, q] = _LN2 * (af * -float(eo))
+    if not per_node:
+        for c in prange(chunk_ptr.shape[0] - 1):
+            for q in range(N):
+                acc = 0.0
+                for i in range(chunk_ptr[c], chunk_ptr[c + 1]):
+                    acc += vals[i, q]
                 out_chunk[c, q] = acc

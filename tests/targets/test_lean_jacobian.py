@@ -23,8 +23,11 @@ def test_jacobian_matches_central_differences(brdf, u, dtype):
     assert J.supports(t)
     x = np.clip(np.array(u) + 0.07, 0.05, 0.95)
     val, jac = J.node_terms_and_jacobian(t, x)
+    # float32 node terms are differences of energies: accurate relative to the largest term
+    # (the classic float32 kernel errs as much), not to a small term's own size
+    scale = 1e-9 if dtype == "float64" else 2e-6 * np.max(np.abs(val))
     np.testing.assert_allclose(val, t.node_terms(x[None])[0],
-                               rtol=1e-12 if dtype == "float64" else 2e-6, atol=1e-9)
+                               rtol=1e-12 if dtype == "float64" else 2e-6, atol=scale)
     h = 1e-6
     fd = np.stack([(get("pls", s).node_terms((x + h * e)[None])[0]
                     - get("pls", s).node_terms((x - h * e)[None])[0]) / (2 * h)

@@ -6,9 +6,13 @@ repeats, so a shared, noisy machine slows both alike.
 
 * ``ns/eval`` at N = 1000 (Ward and Phong, float32 and float64, 100 x 100, 20 labels)
   for the classic and the lean kernel, wall and CPU per thread, and the lean
-  kernel's distance to the **speed of light**: ``22 vector ops per evaluation``
-  (the lean loop's count for Ward: 6 exp2 of ~15 ops, 4 slot terms of 4 ops, the
-  label log-sum-exp, per 6.2 evaluations) divided by the machine's vector-op rate.
+  kernel's distance to the **speed of light**: ``17 vector ops per evaluation``
+  (the lean loop's count for Ward per particle and label: 6 exp2 of 12 ops -- the
+  argument's multiply, max, 3 rounding adds, 5 FMAs, shift, integer add -- ~22 for
+  the four slot terms and the FMA with ``1/sigma_b``, ~14 for the label
+  log-sum-exp: ~108 ops per 6.2 evaluations) divided by the machine's vector-op
+  rate; and the same kernels for one particle (``N=1``: an MCMC step), where the
+  lean family runs its nodes-as-SIMD kernel.
   The rate is measured (a numba loop of independent FMAs, per core, in the kernel's
   own precision and vector width) and also given from nominal figures: vector width
   from the ``avx512f`` flag in ``/proc/cpuinfo`` and LLVM's 256-bit preference
@@ -39,7 +43,7 @@ import numpy as np
 
 from benchmarks._common import append_results, command_line, machine, peak_memory
 
-OPS_PER_EVAL = 22
+OPS_PER_EVAL = 17
 
 
 def _fma_kernel():
@@ -229,20 +233,25 @@ def run(quick: bool = False, parts: tuple[str, ...] = PARTS) -> list[str]:
             f"{rep} alternated repeats; `SoL` = {OPS_PER_EVAL} vector ops per evaluation at the "
             "measured (nominal) vector-op rate of all cores.\n"]
     rows = ["| brdf | dtype | classic ns/eval | lean ns/eval | lean ÷ classic | classic cpu/thr "
-            "| lean cpu/thr | cpu ratio | SoL measured | SoL nominal | lean ÷ SoL |",
-            "|---|---|---|---|---|---|---|---|---|---|---|"]
+            "| lean cpu/thr | cpu ratio | SoL measured | SoL nominal | lean ÷ SoL "
+            "| N=1 classic ms | N=1 lean ms | N=1 lean ÷ classic |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     sol = {dt: speed_of_light(dt) for dt in ("float32", "float64")}
     for brdf in ("ward", "phong") if "nseval" in parts else ():
         scene = _scene(brdf, shape, 10 if quick else 20)
         for dt in ("float32", "float64"):
             t = mrfpe.targets.get("pls", scene, dtype=dt)
             r = ns_per_eval(t, 1000 if not quick else 200, rep)
+            one = ns_per_eval(t, 1, 4 * rep)
+            ms1 = {k: one[k][0] * t._tables.brdf_evals_per_particle / 1e6 for k in one}
             s = sol[dt]
             rows.append(f"| {brdf} | {dt} | {r['classic'][0]:.3f} | {r['lean'][0]:.3f} | "
                         f"{r['lean'][0] / r['classic'][0]:.2f} | {r['classic'][1]:.3f} | "
                         f"{r['lean'][1]:.3f} | {r['lean'][1] / r['classic'][1]:.2f} | "
                         f"{s['sol_ns_eval_measured']:.3f} | {s['sol_ns_eval_nominal']:.3f} | "
-                        f"{r['lean'][1] / s['sol_ns_eval_measured']:.1f} |")
+                        f"{r['lean'][1] / s['sol_ns_eval_measured']:.1f} | "
+                        f"{ms1['classic']:.2f} | {ms1['lean']:.2f} | "
+                        f"{ms1['lean'] / ms1['classic']:.2f} |")
             print(rows[-1], flush=True)
     if "nseval" in parts:
         body += [*rows, ""]

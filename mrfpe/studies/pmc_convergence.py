@@ -199,6 +199,55 @@ def figures(results: list[xr.Dataset], config: dict, out_dir: Path) -> list[str]
     return figs
 
 
+def chosen_trial(group: list[xr.Dataset], config: dict) -> xr.Dataset:
+    """The cell's "randomly chosen run" (Tables 7.5-7.8): drawn from the study seed, so
+    every report of the same trials shows the same one."""
+    order = sorted(group, key=lambda ds: int(ds.attrs.get("repeat", 0)))
+    return order[int(np.random.default_rng(config["seed"]).integers(len(order)))]
+
+
+def single_runs(results: list[xr.Dataset], config: dict) -> list[str]:
+    """One section per (model, labels): the chosen trial's per-iteration MAP distances and
+    weight variance (the layout of the thesis's single-run Tables 7.5-7.8)."""
+    sizes, T = config["n_samples"], config["n_iterations"]
+    main = _main_variant(config["variants"])
+    out = []
+    for (brdf, labels), group in by_cell(results, "brdf", "n_labels").items():
+        ds = _stack([chosen_trial(group, config)]).isel(trial=0).sel(variant=main)
+        header, cols = ["iter"], []
+        for n in sizes:
+            m = ds.sel(n_samples=n)
+            header += [f"N={n} π-MAP", "best-so-far", "var×1e6"]
+            cols += [m["pimap_to_truth"].values, m["map_to_truth"].values,
+                     m["weight_var"].values * 1e6]
+        rows = [[it + 1, *(c[it] for c in cols)] for it in range(T)]
+        out.append(f"### {brdf}, {labels} labels: repetition {int(ds.attrs.get('repeat', -1))}"
+                   f" (`{main}`)\n\n" + markdown_table(header, rows))
+    return out
+
+
+def scene_figure(results: list[xr.Dataset], config: dict, out_dir: Path) -> list[str]:
+    """Figs. 7.1-7.2: the chosen trial's surface (range of the true labels) and its
+    rendering, per model; rebuilt from the trial's seed (no maximiser)."""
+    cells = by_cell(results, "brdf", "n_labels")
+    shown = {}
+    for (brdf, labels), group in cells.items():
+        shown.setdefault(brdf, (labels, chosen_trial(group, config)))
+    if not shown:
+        return []
+    fig, axes = new_figure(len(shown), 2, size=(8.0, 3.4 * len(shown)))
+    for row, (brdf, (labels, ds)) in zip(axes, shown.items()):
+        cfg = {**config, "n_labels": labels, "maximiser_grid": None}
+        prob = problem_from_config(cfg, child_seeds(int(ds.attrs["seed"]), 2)[0], brdf=brdf)
+        sc = prob.scene
+        depth = np.take_along_axis(sc.label_ranges, sc.observed_labels[..., None], -1)[..., 0]
+        for ax, img, title in ((row[0], depth, "true ranges"), (row[1], sc.image, "image")):
+            h = ax.imshow(img, cmap="viridis" if ax is row[0] else "gray")
+            fig.colorbar(h, ax=ax, fraction=0.046)
+            ax.set(title=f"{brdf} ({config['surfaces'][brdf]}): {title}", xticks=[], yticks=[])
+    return [save_figure(fig, out_dir / "pmc_scenes.png")]
+
+
 def _stack(group: list[xr.Dataset]) -> xr.Dataset:
     """A cell's trials along ``trial``; trials written before the π-MAP was recorded get NaN."""
     filled = []
@@ -237,10 +286,19 @@ def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
         "whose MAP scored higher than the maximiser found for the scene (it should be 0; "
         "otherwise the maximiser search missed the peak and *max* distances are suspect).")
     figs = figures(results, config, out_dir)
-    write_report(out_dir, "PMC convergence (thesis Tables 7.1-7.4)", [
+    scenes = scene_figure(results, config, out_dir)
+    singles = ("## Single runs (the layout of Tables 7.5-7.8)\n\nOne run per cell, drawn "
+               "from the study seed (the thesis's are other random scenes, so only the "
+               "pattern compares: the highest-weight particle's distance moves up and down, "
+               "the best-so-far falls). *π-MAP* is missing (nan) in trials written before "
+               "it was recorded.")
+    write_report(out_dir, "PMC convergence (thesis Tables 7.1-7.8, Figs. 7.1-7.2)", [
         f"Config: `{json.dumps(config)}`.", legend,
         "## Final iteration, all variants\n\n" + summary, *sections,
-        *(f"![{f}]({f})" for f in figs)])
+        *(f"![{f}]({f})" for f in figs), singles, *single_runs(results, config),
+        "## The synthetic scenes (Figs. 7.1-7.2)\n\nThe chosen run's scene per model: "
+        "smooth thin-plate-spline surfaces for Ward, jagged ones for Phong (7.2).",
+        *(f"![{f}]({f})" for f in scenes)])
     return summary
 
 

@@ -241,8 +241,12 @@ def scene_figure(results: list[xr.Dataset], config: dict, out_dir: Path) -> list
         prob = problem_from_config(cfg, child_seeds(int(ds.attrs["seed"]), 2)[0], brdf=brdf)
         sc = prob.scene
         depth = np.take_along_axis(sc.label_ranges, sc.observed_labels[..., None], -1)[..., 0]
-        for ax, img, title in ((row[0], depth, "true ranges"), (row[1], sc.image, "image")):
-            h = ax.imshow(img, cmap="viridis" if ax is row[0] else "gray")
+        # the image's scale clipped at its 99th percentile: a sharp highlight would
+        # otherwise leave the rest black
+        for ax, img, title, vmax in ((row[0], depth, "true ranges", None),
+                                     (row[1], sc.image, "image (clipped at p99)",
+                                      float(np.percentile(sc.image, 99)))):
+            h = ax.imshow(img, cmap="viridis" if vmax is None else "gray", vmax=vmax)
             fig.colorbar(h, ax=ax, fraction=0.046)
             ax.set(title=f"{brdf} ({config['surfaces'][brdf]}): {title}", xticks=[], yticks=[])
     return [save_figure(fig, out_dir / "pmc_scenes.png")]

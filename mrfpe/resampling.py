@@ -149,7 +149,10 @@ def ess(post_or_log_w: Any) -> float:
     lw = _log_weights(post_or_log_w)
     if lw.size == 0:
         return 0.0
-    return float(np.exp(-logsumexp(2.0 * lw)))
+    # a max-shifted log-sum-exp in plain NumPy: samplers call this inside their softening
+    # searches, where scipy's logsumexp costs ~10x more per call
+    m = float(np.max(2.0 * lw))
+    return float(np.exp(-(m + np.log(np.sum(np.exp(2.0 * lw - m))))))
 
 
 def perplexity(post_or_log_w: Any, *, normalised: bool = True) -> float:

@@ -28,7 +28,9 @@ def one_numba_thread():
 def triangle(ds: xr.Dataset, to_truth: str, to_max: str) -> None:
     """|d(MAP, truth) − d(MAP, max)| ≤ d(max, truth): the two distances are consistent."""
     gap = np.abs(ds[to_truth] - ds[to_max]).values
-    assert np.all(gap <= float(ds["maximiser_to_truth"]) + 1e-9)
+    # trials may store the distances in float32 (unit-cube distances < 2: rounding < 2.4e-7)
+    slack = 5e-7 if ds[to_truth].dtype == np.float32 else 1e-9
+    assert np.all(gap <= float(ds["maximiser_to_truth"]) + slack)
 
 
 def check_importance_sampling(results, cfg):

@@ -214,6 +214,16 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--out", default=None,
                    help="output directory (default: studies/NAME/out, or out-quick with "
                         "--quick); rerun with the same one to resume")
+    rp = st_sub.add_parser("report", help="write a study's report from the trial files on "
+                                          "disk, running nothing (complete cells only)")
+    rp.add_argument("name", help="study name (see 'mrfpe study list') or path to a .py file")
+    rp.add_argument("--quick", action="store_true", help="the study's reduced settings")
+    rp.add_argument("--trials", type=int, default=None, help="repetitions per grid cell")
+    rp.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="override a setting, as for 'run'")
+    rp.add_argument("--out", default=None, help="output directory, as for 'run'")
+    rp.add_argument("--partial", action="store_true",
+                    help="also summarise cells with only some repetitions on disk")
     st.set_defaults(func=_study)
     return p
 

@@ -193,7 +193,9 @@ def figures(results: list[xr.Dataset], config: dict, out_dir: Path) -> list[str]
                         ax.plot(it, ref, c + ":", marker=".", label=f"N={n} thesis")
                 ax.set(title=f"{labels} labels", xlabel="PMC iteration", yscale="log")
             axes[0, 0].set_ylabel("mean MAP distance")
-            axes[0, -1].legend(fontsize=6)
+            filled = [ax for ax in axes[0] if ax.get_legend_handles_labels()[0]]
+            if filled:  # a cell with no trials yet leaves its panel empty
+                filled[-1].legend(fontsize=6)
             fig.suptitle(f"PMC `{variant}` on {brdf} ({config['surfaces'][brdf]} surfaces)")
             figs.append(save_figure(fig, out_dir / f"pmc_{brdf}_{variant}.png"))
     return figs

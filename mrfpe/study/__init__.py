@@ -63,11 +63,13 @@ from mrfpe.study.results import by_cell
 from mrfpe.study.runner import RunReport, run
 from mrfpe.study.seeds import Task, tasks, trial_seed
 from mrfpe.study.spec import Setting, Study
+from mrfpe.study.summary import Summary, summarise_existing
 
 __all__ = [
     "RunReport",
     "Setting",
     "Study",
+    "Summary",
     "Task",
     "apply_overrides",
     "available",
@@ -82,6 +84,7 @@ __all__ = [
     "parse_value",
     "resolve_config",
     "run",
+    "summarise_existing",
     "tasks",
     "trial_seed",
 ]

@@ -74,6 +74,14 @@ def cli(args: Any) -> int:
         return 0
     config = resolve_config(study, quick=args.quick, overrides=args.set, n_trials=args.trials)
     out = Path(args.out) if args.out else default_out_dir(study, args.quick)
+    if args.study_command == "report":
+        from mrfpe.study.summary import summarise_existing
+
+        summary = summarise_existing(study, config, out, partial=args.partial)
+        print(summary.text())
+        print(summary.table)
+        print(f"report: {out / 'report.md'}")
+        return 0
     print(f"study {study.name} ({study.source}); full run: {study.full_run}")
     try:
         report = run(study, config, out, scheduler=args.scheduler, progress=True,

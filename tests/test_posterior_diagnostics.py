@@ -148,3 +148,29 @@ def test_posterior_warning_points_at_the_callers_line():
         mrfpe.sample("pmc", CorrelatedGaussian(), seed=0, n_samples=20, n_iterations=2)
     hits = [w for w in rec if issubclass(w.category, mrfpe.PosteriorWarning)]
     assert hits and all(w.filename == __file__ for w in hits)
+
+
+def test_a_declared_bias_is_unreliable_whatever_the_ess():
+    import warnings
+
+    import mrfpe
+    from mrfpe.posterior import PosteriorWarning, build
+    from mrfpe.testing import box_gaussian
+
+    rng = np.random.default_rng(0)
+    theta = rng.random((500, 2))
+    with pytest.raises(ValueError, match="bias must be a non-empty string"):
+        build(theta, np.zeros(500), param_names=["a", "b"], sampler="x", bias="")
+    with pytest.warns(PosteriorWarning, match="known bias: ignores the proposal"):
+        post = build(theta, np.zeros(500), param_names=["a", "b"], sampler="x",
+                     bias="ignores the proposal")
+    assert post.attrs["diag_ess"] == pytest.approx(500) and not post.attrs["diag_reliable"]
+    assert post.attrs["bias"] == "ignores the proposal"
+    # SIR's thesis weights declare theirs; the default mixture weights do not
+    t = box_gaussian(3)
+    with pytest.warns(PosteriorWarning, match="known bias: weights='thesis'"):
+        mrfpe.sample("sir", t, seed=0, n_samples=300, n_iterations=3, weights="thesis")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", PosteriorWarning)
+        assert "bias" not in mrfpe.sample("sir", t, seed=0, n_samples=300,
+                                          n_iterations=3).attrs

@@ -38,6 +38,9 @@ Three published diagnostics, each computed by a well-known library:
 A posterior of ``kind="optima"`` (the optima of a multi-start optimiser) is not a
 posterior sample at all: :func:`diagnose` says so and marks it unreliable, and
 :func:`mrfpe.posterior.build` does not warn about it (the kind is declared).
+A posterior whose sampler declares a **known bias** (the attribute ``bias``, set by
+``build(bias=...)``: e.g. SIR's ``weights="thesis"``, exact to the thesis but not
+an importance sampler of the target) is unreliable whatever its ESS, and says why.
 
 :func:`mrfpe.posterior.build` stores the result as the attributes
 ``diag_ess``, ``diag_ess_kish``, ``diag_ess_chain``, ``diag_pareto_k``, ``diag_rhat``
@@ -329,6 +332,8 @@ def diagnose(post: Any) -> dict[str, Any]:
                         "optimiser, not draws from the posterior, so its weighted moments and "
                         "spread are not posterior estimates (use a sampler for those)")
     fix = _Remedy(post, n_chains, chain_type, ess_used)
+    if post.attrs.get("bias"):  # the estimator itself is off, whatever the ESS says
+        messages.append(f"known bias: {post.attrs['bias']}")
     if not ess_used >= ESS_MIN:
         messages.append(f"ESS {ess_used:.1f} < {ESS_MIN:g}: {fix.ess()}")
     if not (math.isnan(k) or k <= k_max):

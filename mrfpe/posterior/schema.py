@@ -80,6 +80,7 @@ def build(
     kind: str = "draws",
     log_evidence: float | None = None,
     log_evidence_se: float | None = None,
+    bias: str | None = None,
     sampler: str,
     config: dict | None = None,
     seed: int | None = None,
@@ -110,6 +111,9 @@ def build(
     log_evidence, log_evidence_se : the estimate of the target's log normaliser
         relative to the box, ``log(∫_box p / vol(box))``, and its standard error
         (:func:`mrfpe.samplers.kit.box_log_evidence`), stored as attributes if given.
+    bias : a known bias of the estimator as configured (e.g. weights that ignore the
+        density the draws came from), in words; stored as the attribute ``bias``, it
+        makes the diagnosis unreliable whatever the ESS (:func:`mrfpe.posterior.diagnose`).
     sampler : the sampler's registered name.
     target : the target object (its ``describe()`` is stored) or a dict.
     extra_vars : further ``{name: (dims, values)}`` variables (e.g. ``acceptance``).
@@ -197,6 +201,11 @@ def build(
         v = _optional_float(key, value)
         if v is not None:
             attrs[key] = v
+    if bias is not None:
+        if not isinstance(bias, str) or not bias.strip():
+            raise ValueError(f"bias must be a non-empty string (the known bias, in words); "
+                             f"got {bias!r}")
+        attrs["bias"] = bias
     attrs.update(extra_attrs or {})
     post = xr.Dataset(data, coords={"param": names, "step": np.arange(n_steps)}, attrs=attrs)
     diag = diagnose(post)

@@ -121,7 +121,7 @@ def pl_terms(tables: DataTables, coef: np.ndarray, *, full: bool, unary: np.ndar
         hi = HI32 if np.dtype(dtype) == np.float32 else HI64
         lean = exponent_bound(lean_tables(t, full), log2_coef[:, 3:]) <= hi
         coef = log2_coef if lean else coef
-    if labels_simd:  # a few particles: the labels are the SIMD lanes, no padding
+    if labels_simd:  # a few particles: no padding (the small-batch kernels)
         npad = N
         bl = 0
         coef_t = np.ascontiguousarray(coef.T, dtype=ft)

@@ -107,17 +107,24 @@ class Target:
                      "evaluate fewer at a time")
         out = np.full(n, -np.inf)
         idx = np.flatnonzero(self.in_bounds(theta))
-        if idx.size:
+        if not idx.size:
+            return out
+        bar = None
+        if progress:  # no bar object otherwise: a chain's single-point calls pay ~40 µs for one
             from tqdm.auto import tqdm
 
-            with tqdm(total=int(idx.size), disable=not progress, unit="theta",
-                      desc=f"{getattr(self, 'name', '') or type(self).__name__} log_prob",
-                      leave=False) as bar:
-                for sl in chunk_rows(int(idx.size), per_row):
-                    rows_ix = idx[sl]
-                    vals = np.asarray(self._log_prob(theta[rows_ix]), dtype=np.float64)
-                    out[rows_ix] = np.where(np.isnan(vals), -np.inf, vals)
+            bar = tqdm(total=int(idx.size), unit="theta", leave=False,
+                       desc=f"{getattr(self, 'name', '') or type(self).__name__} log_prob")
+        try:
+            for sl in chunk_rows(int(idx.size), per_row):
+                rows_ix = idx[sl]
+                vals = np.asarray(self._log_prob(theta[rows_ix]), dtype=np.float64)
+                out[rows_ix] = np.where(np.isnan(vals), -np.inf, vals)
+                if bar is not None:
                     bar.update(rows_ix.size)
+        finally:
+            if bar is not None:
+                bar.close()
         return out
 
     def _row_bytes(self) -> float:

@@ -20,7 +20,8 @@ repeats, so a shared, noisy machine slows both alike.
   bit; AMD Zen 4: 2 x 256 bit, i.e. 512-bit ops at half rate), the clock from
   ``cpu MHz``;
 * PMC 1000 x 20 on 100 x 100, 10 labels: today's code (classic kernel, NumPy
-  mixture density) against lean kernel + numba mixture density, in float32 and
+  mixture density, BLAS threads left to OpenBLAS) against lean kernel + numba mixture
+  density + single-threaded BLAS (:func:`mrfpe.threads.blas_threads`), in float32 and
   float64, the MAP of both (same float type) and the run's peak memory;
 * ``lm_multiseed`` (50 x 50, 20 labels, 27 seeds): today's (classic kernel,
   forward-difference Jacobian) against the lean kernel with the analytic Jacobian;
@@ -151,18 +152,23 @@ def ns_per_eval(target, n: int, repeat: int, kernels=("classic", "lean")) -> dic
 
 @contextmanager
 def _today(kernel: str):
-    """``"classic"``: today's code path (classic kernel, NumPy mixture density in PMC)."""
+    """``"classic"``: today's code path (classic kernel, NumPy mixture density in PMC, BLAS
+    on its own thread count)."""
     import mrfpe.samplers.pmc as pmc_mod
+    from mrfpe import threads
     from mrfpe.mixture import log_mixture_density, log_mixture_density_numpy
     from mrfpe.targets.dispatch import use_kernel
 
-    pmc_mod.log_mixture_density = (log_mixture_density_numpy if kernel == "classic"
-                                   else log_mixture_density)
+    today = kernel == "classic"
+    pmc_mod.log_mixture_density = log_mixture_density_numpy if today else log_mixture_density
+    blas = threads.BLAS_THREADS
+    threads.BLAS_THREADS = None if today else blas
     try:
         with use_kernel(kernel):
             yield
     finally:
         pmc_mod.log_mixture_density = log_mixture_density
+        threads.BLAS_THREADS = blas
 
 
 def pmc_compare(shape, n_labels, dtype, n_samples, n_iter, repeat) -> dict:
@@ -191,20 +197,21 @@ def pmc_compare(shape, n_labels, dtype, n_samples, n_iter, repeat) -> dict:
 def lm_compare(shape, n_labels, n_seeds, repeat) -> dict:
     import mrfpe
     from mrfpe.targets import jacobian
-    from mrfpe.targets.dispatch import use_kernel
 
     t = mrfpe.targets.get("pls", _scene("ward", shape, n_labels))
     orig = jacobian.supports
     times = {"today": [], "new": []}
     maps = {}
     try:
-        for _ in range(repeat):
+        for r in range(-1, repeat):  # r = -1: a warm-up of both (numba loads, tables)
             for k in ("today", "new"):
                 jacobian.supports = orig if k == "new" else (lambda target: False)
-                with use_kernel("lean" if k == "new" else "classic"):
+                with _today("lean" if k == "new" else "classic"):
                     t0 = time.perf_counter()
-                    post = mrfpe.sample("lm_multiseed", t, seed=0, n_seeds=n_seeds)
-                    times[k].append(time.perf_counter() - t0)
+                    post = mrfpe.sample("lm_multiseed", t, seed=0,
+                                        n_seeds=n_seeds if r >= 0 else 1)
+                    if r >= 0:
+                        times[k].append(time.perf_counter() - t0)
                 maps[k] = post["map_theta"].values[-1]
     finally:
         jacobian.supports = orig
@@ -277,7 +284,8 @@ def run(quick: bool = False, parts: tuple[str, ...] = PARTS) -> list[str]:
     if "lm" not in parts:
         return body
     # lm_multiseed
-    lm = lm_compare((20, 20) if quick else (50, 50), 10 if quick else 20, 4 if quick else 27, 1)
+    lm = lm_compare((20, 20) if quick else (50, 50), 10 if quick else 20, 4 if quick else 27,
+                    1 if quick else 2)
     body += ["", f"- lm_multiseed ({'20x20, 10' if quick else '50x50, 20'} labels, "
              f"{4 if quick else 27} seeds): today (classic kernel, forward differences) "
              f"{lm['today_s']:.1f} s, lean + analytic Jacobian {lm['new_s']:.1f} s, ratio "

@@ -29,10 +29,12 @@ def sample(sampler: Any, target: Any, *, seed: int | None = None, progress: bool
     ``mrfpe.sample("pmc", target, seed=0, n_samples=1000, n_iterations=20)``;
     an instance carries its own (passing ``config`` with one is a ``TypeError``).
     A setting the sampler does not take is a ``ValueError`` naming the nearest one.
+    BLAS runs on one thread meanwhile (:func:`mrfpe.threads.blas_threads`).
     """
     import inspect
 
     from mrfpe.samplers import get, validate_sampler
+    from mrfpe.threads import blas_threads
     from mrfpe.validation import check_keywords, keyword_names
 
     if isinstance(sampler, str) or inspect.isclass(sampler):
@@ -45,7 +47,8 @@ def sample(sampler: Any, target: Any, *, seed: int | None = None, progress: bool
             raise TypeError(f"configuration {sorted(config)} given with an already constructed "
                             f"sampler {sampler!r}; pass the class or a name instead")
         instance = sampler
-    return instance.run(target, seed=seed, progress=progress, callback=callback)
+    with blas_threads():
+        return instance.run(target, seed=seed, progress=progress, callback=callback)
 
 
 def distance(name: str, a: Any, b: Any, **params: Any) -> float:

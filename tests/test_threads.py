@@ -18,3 +18,38 @@ def test_thread_budget_scales_with_work_and_restores():
     with pytest.raises(RuntimeError), thread_budget(1):
         raise RuntimeError("restored on error too")
     assert numba.get_num_threads() == have
+
+
+def _blas_threads_now() -> list[int]:
+    from threadpoolctl import threadpool_info
+
+    return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+
+
+def test_blas_threads_limits_and_restores():
+    import numpy as np  # noqa: F401 - loads the BLAS threadpoolctl reports
+
+    from mrfpe import threads
+
+    before = _blas_threads_now()
+    assert before, "numpy's BLAS should be visible to threadpoolctl"
+    with threads.blas_threads():
+        assert set(_blas_threads_now()) == {threads.BLAS_THREADS}
+    assert _blas_threads_now() == before
+    old = threads.BLAS_THREADS
+    try:
+        threads.BLAS_THREADS = None  # leave BLAS alone
+        with threads.blas_threads():
+            assert _blas_threads_now() == before
+    finally:
+        threads.BLAS_THREADS = old
+
+
+def test_sample_runs_samplers_with_one_blas_thread():
+    import mrfpe
+    from mrfpe.testing.targets import CorrelatedGaussian
+
+    seen = []
+    mrfpe.sample("pmc", CorrelatedGaussian(), seed=0, n_samples=200, n_iterations=2,
+                 callback=lambda step, info: seen.append(_blas_threads_now()))
+    assert seen and all(set(s) == {1} for s in seen)

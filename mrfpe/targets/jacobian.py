@@ -20,8 +20,8 @@ Cost: about 1.2 value passes of the small-batch kernel for Ward and 1.5 for the
 full form (one core, 20 labels: Ward 100×100 3.1 ms against 2.6 ms for the residuals
 alone; Phong 50×50 1.7 ms against 1.1 ms), against ``d + 1`` for forward differences,
 and exact. The label loops are split so that each has at most four store streams:
-with more, LLVM needs too many runtime alias checks and leaves the loop scalar (2.6×
-slower for Ward).
+with five or more (beside ~20 load streams) LLVM left the loop scalar, 2.6× slower
+for Ward (measured on numba 0.68; see docs/targets.md).
 """
 
 from __future__ import annotations
@@ -81,8 +81,8 @@ def _grad_nodes(coef, full, recT, nrecT, unaryT, obs, inv_sigma, n, a, b,
         ha1, ha2, hb1, hb2 = np.empty(NB), np.empty(NB), np.empty(NB), np.empty(NB)
         wa1, wa2, wb1, wb2 = np.empty(NB), np.empty(NB), np.empty(NB), np.empty(NB)
         y0, y1, y2, y3 = nrecT[0, sl], nrecT[1, sl], nrecT[2, sl], nrecT[3, sl]
-        # LLVM vectorises these loops only with at most four store streams each (more need
-        # too many runtime alias checks), so the full form's label loop is split in four:
+        # LLVM vectorised these loops only with at most four store streams each (module
+        # docstring), so the full form's label loop is split in four:
         # the exponentials in two halves, then the energy with dE/dc0..c2, then dE/de1, e2.
         if full:
             na1, nga1, na2, nga2 = nrecT[4, sl], nrecT[5, sl], nrecT[6, sl], nrecT[7, sl]

@@ -62,6 +62,14 @@ def seed_points(bounds: np.ndarray, n: int, kind: str = "even",
     return np.clip(pts + rng.uniform(-half, half), bounds[:, 0], bounds[:, 1])
 
 
+class _IterationBudget(Exception):
+    """Raised from the Jacobian callback when ``max_iterations`` is used up (carries z)."""
+
+    def __init__(self, z: np.ndarray):
+        super().__init__("LM iteration budget used up")
+        self.z = z
+
+
 class _MultiSeed(Sampler):
     """Shared driver: one local optimisation per seed point, optima as the sample set."""
 
@@ -138,22 +146,31 @@ class LMMultiSeed(_MultiSeed):
         ``"batched"`` (default): the analytic Jacobian of the residuals from the
         same kernel pass as the residuals (:mod:`mrfpe.targets.jacobian`) where
         the target supports it (the BRDF pseudolikelihood family; that pass
-        counts as one evaluation), else MINPACK's forward-difference Jacobian (step
-        √eps·|z_j|) computed in one batched ``residuals`` call of d rows;
-        ``"minpack"``: MINPACK's own column-by-column differences (lmdif), d
-        single calls — the same derivative estimate, about twice the time on a
-        pseudolikelihood target, whose batched evaluation is cheaper per row.
+        counts as one evaluation), else MINPACK lmdif's forward-difference Jacobian
+        (step √eps·|z_j|) computed in one batched ``residuals`` call of d rows;
+        ``"minpack"``: the same differences column by column, d single calls (as
+        lmdif makes them) — the same derivative estimate, about twice the time on
+        a pseudolikelihood target, whose batched evaluation is cheaper per row.
+        Either way scipy runs MINPACK's lmder with this Jacobian function.
     ftol, xtol, gtol : float
         MINPACK's tolerances (scipy's defaults, 1e-8).
     max_nfev : int
-        Residual evaluations per seed (0: scipy's default, 100·d·(d + 1)).
+        Residual evaluations per seed, not counting the Jacobian's (0: scipy's
+        default, 100·d); not an iteration budget, since a rejected trial step costs
+        an evaluation too.
+    max_iterations : int
+        LM iterations per seed (0: no limit), the thesis's budget (Table 8.12: 10
+        iterations): an iteration is one Jacobian evaluation (MINPACK's ``njev``) and
+        the trial steps that follow it; the seed's optimum is the iterate at which
+        the next Jacobian is asked for (``status`` 0 then, scipy's code for a spent
+        budget).
     """
 
     name = "lm_multiseed"
 
     def __init__(self, n_seeds: int = 512, seed_grid: str = "even", transform: str = "sine",
                  jacobian: str = "batched", ftol: float = 1e-8, xtol: float = 1e-8,
-                 gtol: float = 1e-8, max_nfev: int = 0):
+                 gtol: float = 1e-8, max_nfev: int = 0, max_iterations: int = 0):
         self._check_common(n_seeds, seed_grid)
         self.transform = check_choice("transform", transform, ("sine", "clip"))
         self.jacobian = check_choice("jacobian", jacobian, ("batched", "minpack"))
@@ -163,6 +180,7 @@ class LMMultiSeed(_MultiSeed):
         if self.ftol == self.xtol == self.gtol == 0.0:
             raise ValueError("at least one of ftol, xtol, gtol must be > 0")
         self.max_nfev = check_positive_int("max_nfev", max_nfev, minimum=0)
+        self.max_iterations = check_positive_int("max_iterations", max_iterations, minimum=0)
 
     def _prepare(self, target: Any, bounds: np.ndarray) -> None:
         if not callable(getattr(target, "residuals", None)):
@@ -214,27 +232,40 @@ class LMMultiSeed(_MultiSeed):
             return last["r"]
 
         def jac(z: np.ndarray) -> np.ndarray:
+            if self.max_iterations and n_jac[0] >= self.max_iterations:
+                raise _IterationBudget(z.copy())
+            n_jac[0] += 1
             if analytic:
                 if not ("J" in last and np.array_equal(last["z"], z)):
                     fun(z)
                 return last["J"]
-            # MINPACK's forward differences (lmdif's step sqrt(eps)·|z_j|), all d columns
-            # in one batched call; MINPACK evaluated r(z) just before asking for J(z).
+            # lmdif's forward differences (step sqrt(eps)·|z_j|), all d columns in one
+            # batched call or column by column; MINPACK evaluated r(z) just before J(z).
             r0 = last["r"] if "z" in last and np.array_equal(last["z"], z) else fun(z)
             h = _FD_STEP * np.where(z == 0.0, 1.0, np.abs(z))
-            return ((residuals(z[None, :] + np.diag(h)) - r0) / h[:, None]).T
+            zs = z[None, :] + np.diag(h)
+            rows = (residuals(zs) if self.jacobian == "batched"
+                    else np.vstack([residuals(zs[j:j + 1]) for j in range(z.size)]))
+            return ((rows - r0) / h[:, None]).T
 
+        n_jac = [0]
         z0 = self._to_z(x0, lo, hi)
         m = fun(z0).size
         if m < x0.size:
             raise ValueError(f"target.residuals returned {m} values for {x0.size} parameters; "
                              "Levenberg–Marquardt needs at least as many residuals as parameters")
-        res = least_squares(fun, z0, jac=jac if self.jacobian == "batched" else "2-point",
-                            method="lm", ftol=self.ftol or None, xtol=self.xtol or None,
-                            gtol=self.gtol or None, max_nfev=self.max_nfev or None)
-        return self._to_theta(res.x, lo, hi), {"lm_cost": float(res.cost),
-                                               "n_evals": (run.n_evals - start) / cost,
-                                               "status": float(res.status)}
+        try:
+            res = least_squares(fun, z0, jac=jac, method="lm", ftol=self.ftol or None,
+                                xtol=self.xtol or None, gtol=self.gtol or None,
+                                max_nfev=self.max_nfev or None)
+            z, lm_cost, status = res.x, float(res.cost), float(res.status)
+        except _IterationBudget as stop:  # MINPACK evaluated r at the iterate just before
+            z = stop.z
+            r = last["r"] if np.array_equal(last["z"], z) else fun(z)
+            lm_cost, status = 0.5 * float(r @ r), 0.0  # 0: the budget ran out (scipy's code)
+        return self._to_theta(z, lo, hi), {"lm_cost": lm_cost,
+                                           "n_evals": (run.n_evals - start) / cost,
+                                           "status": status}
 
 
 class NLoptMultiSeed(_MultiSeed):

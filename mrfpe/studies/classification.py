@@ -259,7 +259,7 @@ STUDY = Study(
                 "options of the PMC run giving the evolved set",
                 check=lambda opts: check_sampler_options("pmc", opts)),
         Setting("grid_samples", 1000, "points of the unevolved grid set", check=positive),
-        Setting("lm", {"n_seeds": 512, "max_nfev": 40}, "options of the multiple-seed LM run",
+        Setting("lm", {"n_seeds": 512, "max_iterations": 10}, "options of the multiple-seed LM run",
                 check=lambda opts: check_sampler_options("lm_multiseed", opts)),
         Setting("agmmp_sigmas", list(AGMMP_SIGMAS), "kernel widths of the AGMMP distance "
                 "columns", check=positive),
@@ -269,7 +269,7 @@ STUDY = Study(
     check=check_target_options,
     quick={"brdf": ["ward"], "material": [0, 1, 4], "specimen": [0, 1], "shape": [12, 12],
            "n_labels": 10, "pmc": {"n_samples": 64, "n_iterations": 5, "variant": "thesis2"},
-           "grid_samples": 64, "lm": {"n_seeds": 8, "max_nfev": 40}},
+           "grid_samples": 64, "lm": {"n_seeds": 8, "max_iterations": 10}},
     trial=trial,
     summarise=summarise,
     grid=("brdf", "material", "specimen"),

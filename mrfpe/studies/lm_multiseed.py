@@ -10,16 +10,20 @@ average over the N scenes (Figs. 7.3, 7.4) or show one scene (7.5, 7.6).
 What we add: the same curve for the distance to the pseudolikelihood's global
 maximiser, and the same subsets ranked by the pseudolikelihood instead of the
 LM error (the LM objective Σ 1/p_i² is not the PL, and their optima differ).
-The LM budget is the thesis's Table 8.12 setting, 10 LM iterations per seed;
-with MINPACK's forward-difference Jacobian one iteration costs d + 1 residual
-evaluations, hence ``max_nfev = 40`` for d = 3 (``--set lm_options={}`` runs
-each seed to convergence instead).
+The LM budget is the thesis's Table 8.12 setting, 10 LM iterations per seed
+(``lm_options = {"max_iterations": 10}``: ten Jacobian evaluations, the analytic
+Jacobian of :mod:`mrfpe.targets.jacobian`; ``--set lm_options={}`` runs each seed
+to convergence instead). Before Dec 2026 the budget was ``max_nfev = 40``, meant as
+10 iterations of d + 1 forward-difference evaluations; but MINPACK's lmder, which
+scipy runs, counts only the residual calls, so it allowed up to ~35 iterations.
 
-Full run: about 40 h on two cores. That is 160 scenes (2 models × 4 label
-counts × 20) × 512 seeds × up to 40 residual evaluations at 100×100 pixels plus a
-maximiser per scene, measured at 710 s per 20-label scene (shared 2-core machine,
-pseudolikelihood kernel of Nov 2026; ~10 ms per single-point residual vector);
-time grows about linearly with the labels. The thesis needed 1.3-5 h per scene.
+Full run: 160 scenes (2 models × 4 label counts × 20) × 512 seeds × 10 iterations
+(about 12 residual-and-Jacobian passes per seed) at 100×100 pixels plus a maximiser
+per scene. Per 20-label Ward scene on one core of the 2-core AMD EPYC (Dec 2026):
+the passes take ~3 ms each, ~20 s per scene, plus ~5-10 s for the maximiser; Phong's
+full-form Jacobian costs about twice Ward's, and time grows about linearly with the
+labels: about 2-3 h on one core for the whole set. The thesis needed 1.3-5 h per
+scene.
 """
 
 from __future__ import annotations
@@ -177,7 +181,7 @@ STUDY = Study(
         *settings(*DEFAULTS),
         Setting("n_seeds", 512, "LM starting points, evenly spaced in the unit cube",
                 check=positive),
-        Setting("lm_options", {"max_nfev": 40},
+        Setting("lm_options", {"max_iterations": 10},
                 "options of the lm_multiseed sampler ({} runs each seed to convergence)",
                 check=lambda opts: check_sampler_options("lm_multiseed", opts)),
     ],

@@ -167,6 +167,54 @@ def test_nlopt_local_search_from_minus_inf_seeds():
     assert all(i["n_fev"] < 100 for i in info)  # a flat objective stops each search early
 
 
+class CountingRosenbrock(Rosenbrock):
+    """Rosenbrock counting its batched (Jacobian) calls: rows > 1 only come from J."""
+
+    def __init__(self):
+        self.jacobian_calls = 0
+
+    def residuals(self, theta):
+        self.jacobian_calls += np.ndim(theta) == 2 and np.shape(theta)[0] > 1
+        return super().residuals(theta)
+
+
+@pytest.mark.parametrize("k", [1, 2, 4])  # converged after 6
+def test_lm_iteration_budget_stops_at_the_kth_iterate(k):
+    from scipy.optimize import least_squares
+
+    target = CountingRosenbrock()
+    post = LMMultiSeed(n_seeds=1, max_iterations=k).run(target, seed=0)
+    assert target.jacobian_calls == k  # one batched Jacobian per iteration
+    assert post["status"].values[0] == 0.0
+    # independent route: scipy's own LM on the same sine-mapped residuals, recording the
+    # iterate at each Jacobian request; the (k+1)-th request is where the budget stops
+    lo, hi = Rosenbrock.bounds[:, 0], Rosenbrock.bounds[:, 1]
+    x0 = seed_points(Rosenbrock.bounds, 1)[0]
+    to_theta = lambda z: lo + (hi - lo) * 0.5 * (1.0 + np.sin(z))  # noqa: E731
+    fun = lambda z: Rosenbrock().residuals(to_theta(z)[None])[0]  # noqa: E731
+    seen = []
+
+    def jac(z):
+        seen.append(z.copy())
+        h = np.sqrt(np.finfo(float).eps) * np.where(z == 0.0, 1.0, np.abs(z))
+        return np.stack([(fun(z + h[j] * np.eye(2)[j]) - fun(z)) / h[j] for j in range(2)], 1)
+
+    z0 = np.arcsin(np.clip(2.0 * (x0 - lo) / (hi - lo) - 1.0, -1.0, 1.0))
+    least_squares(fun, z0, jac=jac, method="lm", max_nfev=1000)
+    assert len(seen) > k
+    np.testing.assert_allclose(post["theta"].values[0], to_theta(seen[k]), rtol=1e-10)
+    np.testing.assert_allclose(post["lm_cost"].values[0], 0.5 * np.sum(fun(seen[k]) ** 2),
+                               rtol=1e-10)
+
+
+def test_lm_iteration_budget_same_with_either_jacobian():
+    a = LMMultiSeed(n_seeds=8, max_iterations=4).run(Rosenbrock(), seed=0)
+    b = LMMultiSeed(n_seeds=8, max_iterations=4, jacobian="minpack").run(Rosenbrock(), seed=0)
+    np.testing.assert_allclose(a["theta"].values, b["theta"].values, rtol=1e-12)
+    converged = LMMultiSeed(n_seeds=8).run(Rosenbrock(), seed=0)
+    assert (converged["status"].values > 0).all()
+
+
 @pytest.mark.parametrize(("cls", "kw", "match"), [
     (NLoptMultiSeed, {"algorithm": "LN_NOPE"}, "algorithm"),
     (NLoptMultiSeed, {"algorithm": "NUM_ALGORITHMS"}, "algorithm"),
@@ -177,6 +225,7 @@ def test_nlopt_local_search_from_minus_inf_seeds():
     (LMMultiSeed, {"jacobian": "3-point"}, "jacobian"),
     (LMMultiSeed, {"ftol": 0.0, "xtol": 0.0, "gtol": 0.0}, "tol"),
     (LMMultiSeed, {"n_seeds": 0}, "n_seeds"),
+    (LMMultiSeed, {"max_iterations": -1}, "max_iterations"),
 ])
 def test_bad_config(cls, kw, match):
     with pytest.raises(ValueError, match=match):

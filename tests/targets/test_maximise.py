@@ -54,7 +54,7 @@ def test_noise_free_ward_maximiser_near_truth():
     t = get("pls", s)
     theta, lp = maximise(t, grid=20)
     assert np.linalg.norm(theta - u) < 0.1
-    assert lp >= t.log_prob(u)[0] - 1e-9
+    assert lp >= t.log_prob(u)[0] - 1e-8  # 1e-10 relative: the polish stops at xtol 1e-6
 
 
 def test_bad_arguments_are_named():

@@ -32,7 +32,15 @@ import numpy as np
 from numba import njit, prange
 
 from mrfpe.targets.kernels import _FM
-from mrfpe.targets.lean import LOG2E, NODE_BLOCK, exp2_64, lean_tables, lean_tables_t
+from mrfpe.targets.lean import (
+    LOG2E,
+    NODE_BLOCK,
+    exp2_64,
+    label_rows_full,
+    label_rows_ward,
+    lean_tables,
+    lean_tables_t,
+)
 from mrfpe.threads import thread_budget
 
 __all__ = ["node_terms_and_jacobian", "residuals_and_jacobian", "supports"]
@@ -100,20 +108,9 @@ def _grad_nodes(coef, full, recT, nrecT, unaryT, obs, inv_sigma, n, a, b,
                 wb1[j], wb2[j] = qb * ngb1[j], qb * ngb2[j]
             x0, x1, x2, x3, x4, x5 = xs[0], xs[1], xs[2], xs[3], xs[4], xs[5]
             for s in range(B):
-                u = unaryT[s, sl]
-                a0, a1, a2, a3 = recT[0, s, sl], recT[1, s, sl], recT[2, s, sl], recT[3, s, sl]
-                f01, g01 = recT[4, s, sl], recT[5, s, sl]
-                f02, g02 = recT[6, s, sl], recT[7, s, sl]
-                f11, g11 = recT[8, s, sl], recT[9, s, sl]
-                f12, g12 = recT[10, s, sl], recT[11, s, sl]
-                f21, g21 = recT[12, s, sl], recT[13, s, sl]
-                f22, g22 = recT[14, s, sl], recT[15, s, sl]
-                f31, g31 = recT[16, s, sl], recT[17, s, sl]
-                f32, g32 = recT[18, s, sl], recT[19, s, sl]
-                f41, g41 = recT[20, s, sl], recT[21, s, sl]
-                f42, g42 = recT[22, s, sl], recT[23, s, sl]
-                f51, g51 = recT[24, s, sl], recT[25, s, sl]
-                f52, g52 = recT[26, s, sl], recT[27, s, sl]
+                (u, a0, a1, a2, a3, f01, g01, f02, g02, f11, g11, f12, g12, f21, g21, f22, g22,
+                 f31, g31, f32, g32, f41, g41, f42, g42, f51, g51, f52,
+                 g52) = label_rows_full(recT, unaryT, s, sl)
                 es, g0s, g1s, g2s, g3s, g4s = en[s], g[0, s], g[1, s], g[2, s], g[3, s], g[4, s]
                 for j in range(m):
                     x0[j] = exp2_64(E1 * g01[j] + E2 * g02[j])
@@ -171,12 +168,8 @@ def _grad_nodes(coef, full, recT, nrecT, unaryT, obs, inv_sigma, n, a, b,
                 wa1[j] = ha1[j] * nga[j]
                 wb1[j] = hb1[j] * ngb[j]
             for s in range(B):
-                u = unaryT[s, sl]
-                a0, a1, a2, a3 = recT[0, s, sl], recT[1, s, sl], recT[2, s, sl], recT[3, s, sl]
-                f0, e0, f1, e1 = recT[4, s, sl], recT[5, s, sl], recT[6, s, sl], recT[7, s, sl]
-                f2, e2, f3, e3 = recT[8, s, sl], recT[9, s, sl], recT[10, s, sl], recT[11, s, sl]
-                f4, e4 = recT[12, s, sl], recT[13, s, sl]
-                f5, e5 = recT[14, s, sl], recT[15, s, sl]
+                (u, a0, a1, a2, a3, f0, e0, f1, e1, f2, e2, f3, e3, f4, e4, f5,
+                 e5) = label_rows_ward(recT, unaryT, s, sl)
                 es, g0s, g1s, g3s = en[s], g[0, s], g[1, s], g[3, s]  # dE/dc2, e2 = 0
                 for j in range(m):
                     p0 = f0[j] * exp2_64(E1 * e0[j])

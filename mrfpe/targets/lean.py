@@ -441,6 +441,34 @@ def lean_tables_t(lt: LeanTables) -> LeanTablesT:
     return cache["_t"]
 
 
+@njit(inline="always", cache=True)
+def label_rows_full(recT, unaryT, s, sl):  # pragma: no cover - compiled
+    """Label ``s``'s rows of node block ``sl`` in the node-major full-form tables.
+
+    ``(u, a0..a3, f01, g01, f02, g02, ..., f51, g51, f52, g52)``: the unary energy,
+    the four slots' albedo terms, and per variable triangle ``t = 0..5`` its two
+    terms' feature ``f_tk`` and exponent ``g_tk`` (:class:`LeanTablesT`). Bound as 1-D
+    views indexed from 0, so loops over them load vectors, not gathers.
+    """
+    return (unaryT[s, sl], recT[0, s, sl], recT[1, s, sl], recT[2, s, sl], recT[3, s, sl],
+            recT[4, s, sl], recT[5, s, sl], recT[6, s, sl], recT[7, s, sl],
+            recT[8, s, sl], recT[9, s, sl], recT[10, s, sl], recT[11, s, sl],
+            recT[12, s, sl], recT[13, s, sl], recT[14, s, sl], recT[15, s, sl],
+            recT[16, s, sl], recT[17, s, sl], recT[18, s, sl], recT[19, s, sl],
+            recT[20, s, sl], recT[21, s, sl], recT[22, s, sl], recT[23, s, sl],
+            recT[24, s, sl], recT[25, s, sl], recT[26, s, sl], recT[27, s, sl])
+
+
+@njit(inline="always", cache=True)
+def label_rows_ward(recT, unaryT, s, sl):  # pragma: no cover - compiled
+    """As :func:`label_rows_full` for the Ward/Lambertian tables: ``(u, a0..a3, f0, g0, ...,
+    f5, g5)``, one term per variable triangle."""
+    return (unaryT[s, sl], recT[0, s, sl], recT[1, s, sl], recT[2, s, sl], recT[3, s, sl],
+            recT[4, s, sl], recT[5, s, sl], recT[6, s, sl], recT[7, s, sl],
+            recT[8, s, sl], recT[9, s, sl], recT[10, s, sl], recT[11, s, sl],
+            recT[12, s, sl], recT[13, s, sl], recT[14, s, sl], recT[15, s, sl])
+
+
 @njit(parallel=True, fastmath=_FM, error_model="numpy", cache=True)
 def lean_terms_nodes(coef, full, recT, nrecT, unaryT, obs, inv_sigma, chunk_ptr, a, b,
                      do_lse, out_chunk, out_node, per_node):  # pragma: no cover - compiled
@@ -492,20 +520,9 @@ def lean_terms_nodes(coef, full, recT, nrecT, unaryT, obs, inv_sigma, chunk_ptr,
                     fb1[j] = hb1[j] * xb
                     fb2[j] = hb2[j] * xb
                 for s in range(B):
-                    u = unaryT[s, sl]
-                    a0, a1, a2, a3 = recT[0, s, sl], recT[1, s, sl], recT[2, s, sl], recT[3, s, sl]
-                    f01, g01 = recT[4, s, sl], recT[5, s, sl]
-                    f02, g02 = recT[6, s, sl], recT[7, s, sl]
-                    f11, g11 = recT[8, s, sl], recT[9, s, sl]
-                    f12, g12 = recT[10, s, sl], recT[11, s, sl]
-                    f21, g21 = recT[12, s, sl], recT[13, s, sl]
-                    f22, g22 = recT[14, s, sl], recT[15, s, sl]
-                    f31, g31 = recT[16, s, sl], recT[17, s, sl]
-                    f32, g32 = recT[18, s, sl], recT[19, s, sl]
-                    f41, g41 = recT[20, s, sl], recT[21, s, sl]
-                    f42, g42 = recT[22, s, sl], recT[23, s, sl]
-                    f51, g51 = recT[24, s, sl], recT[25, s, sl]
-                    f52, g52 = recT[26, s, sl], recT[27, s, sl]
+                    (u, a0, a1, a2, a3, f01, g01, f02, g02, f11, g11, f12, g12, f21, g21, f22,
+                     g22, f31, g31, f32, g32, f41, g41, f42, g42, f51, g51, f52,
+                     g52) = label_rows_full(recT, unaryT, s, sl)
                     es = en[s]
                     for j in range(m):
                         x0 = fexp2(E1 * g01[j] + E2 * g02[j])
@@ -529,13 +546,8 @@ def lean_terms_nodes(coef, full, recT, nrecT, unaryT, obs, inv_sigma, chunk_ptr,
                     fa1[j] = ha1[j] * fexp2(E1 * ga1[j])
                     fb1[j] = hb1[j] * fexp2(E1 * gb1[j])
                 for s in range(B):
-                    u = unaryT[s, sl]
-                    a0, a1, a2, a3 = recT[0, s, sl], recT[1, s, sl], recT[2, s, sl], recT[3, s, sl]
-                    f0, g0, f1, g1 = recT[4, s, sl], recT[5, s, sl], recT[6, s, sl], recT[7, s, sl]
-                    f2, g2 = recT[8, s, sl], recT[9, s, sl]
-                    f3, g3 = recT[10, s, sl], recT[11, s, sl]
-                    f4, g4 = recT[12, s, sl], recT[13, s, sl]
-                    f5, g5 = recT[14, s, sl], recT[15, s, sl]
+                    (u, a0, a1, a2, a3, f0, g0, f1, g1, f2, g2, f3, g3, f4, g4, f5,
+                     g5) = label_rows_ward(recT, unaryT, s, sl)
                     es = en[s]
                     for j in range(m):
                         d = abs(y0[j] - C0 * a0[j]

@@ -25,16 +25,16 @@ variance is the population variance of the normalised weights of the
 iteration's set (``var`` columns; for PMC (II) these are the 1/G weights of
 6.6.2 that represent the uniform distribution).
 
-Full run: about 20 h on two cores in float32 (the default). That is 800 scenes
-(2 models × 4 label counts × 100) × (PMC with 1000+125+64 particles × 20
-iterations, two variants, plus a maximiser) at 100×100 pixels; measured on a
-2-core Intel Xeon (Nov 2026): the 20-label Ward column (``--set n_labels=20
---set 'brdf=["ward"]'``, 100 trials) took 86 min, about 40-50 s per scene
-(maximiser ~20 s, PMC (II) 15 s, mixture PMC 10 s); time grows about linearly
-with the labels (Ward: 6 h for all four columns), and Phong's scenes cost
-about twice Ward's. float64
-(``--set 'target_options={"dtype": "float64"}'``) takes about 2.5× as long.
-The result of that 20-label run is in ``docs/results/pmc_convergence_ward20``.
+Full run: about 3.5 h on two cores (one process per core) in float32 (the
+default). That is 800 scenes (2 models × 4 label counts × 100) × (PMC with
+1000+125+64 particles × 20 iterations, two variants, plus a maximiser) at
+100×100 pixels; measured per scene on one core of a 2-core AMD EPYC (Dec 2026,
+lean kernel, single-threaded BLAS): Ward 13 s at 10 labels, ~25 s at 20, ~40 s
+at 40; Phong 19 s at 10 labels, 27 s at 20 (a 20-label Ward scene: PMC (II)
+~7 s, mixture PMC ~4 s, the maximiser ~6 s, the rest building the scene).
+float64 (``--set 'target_options={"dtype": "float64"}'``) takes about 2× as
+long. An older 20-label Ward column (Nov 2026 defaults) is in
+``docs/results/pmc_convergence_ward20``.
 
 Precision: the target is built in float32 by default. PMC needs log-target
 differences to a fraction of a nat; float32 per-node terms (summed in

@@ -15,12 +15,11 @@ maximiser.
 Timings are only meaningful when nothing else competes for the cores: run
 this study in-process (no ``--scheduler``) on an otherwise idle machine.
 
-Full run: about 12 h on two cores. That is 12 scenes (4 label counts × 3) × all
-ten runs, measured at 50 min per 20-label scene (shared 2-core machine,
-pseudolikelihood kernel of Nov 2026; ~8 ms per single-point evaluation), most
-of it in the single-point samplers: ``nlopt_multiseed`` (512 seeds × up to 500
-evaluations), the two 20000-step chains and 512-seed LM. ``--trials 1`` takes
-about 4 h.
+Full run: about 2 h on two cores, estimated from its parts (Dec 2026 kernels;
+not yet run at full size). That is 12 scenes (4 label counts × 3) × all ten
+runs; per 20-label Ward scene most of the time goes to the single-point
+samplers: ``nlopt_multiseed`` (512 seeds × up to 500 evaluations at ~0.65 ms),
+the two 20000-step chains (~15 s each) and 512-seed LM (~25 s).
 """
 
 from __future__ import annotations

@@ -14,10 +14,10 @@ target's global maximiser (dense grid + local optimiser) to the truth, and for
 every configured sampler run the distances from its MAP to that maximiser and
 to the truth. The scenes of a repetition are shared across σ_b values.
 
-Full run: about 5 h on two cores. That is 160 scenes (2 models × 2 surfaces ×
-4 σ_b × 10) × 3 targets × (maximiser + PMC 1000×20) at 100×100 pixels, measured at
-100 s per scene (20 labels, shared 2-core machine, pseudolikelihood kernel of Nov
-2026).
+Full run: about 1.7 h on two cores (one process per core). That is 160 scenes
+(2 models × 2 surfaces × 4 σ_b × 10) × 3 targets × (maximiser + PMC 1000×20) at
+100×100 pixels, measured at 63 s per 20-label Ward/smooth scene on one core (AMD
+EPYC, Dec 2026).
 """
 
 from __future__ import annotations

@@ -1,0 +1,67 @@
+"""The classification study's summary: ESS of the feature sets and the grid tempering."""
+
+from __future__ import annotations
+
+import json
+import re
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from mrfpe.studies.classification import STUDY, summarise
+
+
+def _fake_trial(material: int, specimen: int, rng: np.random.Generator) -> xr.Dataset:
+    centre = np.array([0.2, 0.5, 0.8])[material] * np.ones(3)
+    grid = np.random.default_rng(1).random((200, 3))  # one grid for all, as the study
+    lt = -5e3 * np.sum((grid - centre) ** 2, axis=1)  # a sharp, PL-like peak: ESS ~ 1
+    lw = lt - np.logaddexp.reduce(lt)
+    ev = centre + 0.01 * rng.normal(size=(100, 3))
+    ds = xr.Dataset(
+        {"evolved_theta": (("evolved_sample", "param"), ev),
+         "evolved_log_weight": (("evolved_sample",), np.full(100, -np.log(100.0))),
+         "evolved_map": (("param",), ev[0]),
+         "grid_theta": (("grid_sample", "param"), grid),
+         "grid_log_weight": (("grid_sample",), lw),
+         "lm_best": (("param",), centre), "truth": (("param",), centre)},
+        coords={"param": ["a", "b", "c"]})
+    ds.attrs["cell"] = json.dumps({"brdf": "ward", "material": material, "specimen": specimen})
+    return ds
+
+
+def _ess_row(report: str, kind: str) -> list[str]:
+    line = next(r for r in report.splitlines() if r.startswith(f"| ward | {kind} |"))
+    return [c.strip() for c in line.strip("|").split("|")]
+
+
+@pytest.mark.parametrize("lam", [1.0, 0.001])
+def test_summary_reports_feature_ess_and_tempers_the_grid(tmp_path, lam):
+    rng = np.random.default_rng(0)
+    results = [_fake_trial(m, s, rng) for m in range(3) for s in range(2)]
+    from mrfpe.study import resolve_config
+
+    config = {**resolve_config(STUDY), "brdf": ["ward"], "grid_power": lam,
+              "agmmp_sigmas": [0.1], "extra_distances": []}
+    summarise(results, config, tmp_path)
+    report = (tmp_path / "report.md").read_text()
+    assert "## Information in the feature sets" in report
+    row = _ess_row(report, "unevolved")
+    median = float(row[3])
+    # independent route: Kish's ESS of the tempered, renormalised grid weights
+    want = []
+    for ds in results:
+        w = np.exp(lam * ds["grid_log_weight"].values)
+        want.append(w.sum() ** 2 / np.sum(w ** 2))
+    assert row[2] == f"{lam:g}"
+    assert median == pytest.approx(np.median(want), abs=0.06)
+    assert (median < 2.0) if lam == 1.0 else (median > 50.0)
+    assert re.fullmatch(r"\d+ / 6", row[6])
+    assert float(_ess_row(report, "evolved")[3]) == pytest.approx(100.0)  # equal weights: S
+
+
+def test_grid_power_is_checked():
+    from mrfpe.study import resolve_config
+
+    with pytest.raises(ValueError, match="grid_power"):
+        resolve_config(STUDY, overrides=["grid_power=1.5"])

@@ -10,22 +10,22 @@ average over the N scenes (Figs. 7.3, 7.4) or show one scene (7.5, 7.6).
 What we add: the same curve for the distance to the pseudolikelihood's global
 maximiser, and the same subsets ranked by the pseudolikelihood instead of the
 LM error (the LM objective Σ 1/p_i² is not the PL, and their optima differ).
-The LM budget. Table 8.12's header says "512 seeds, 10 iterations"; read as ten
-LM iterations per seed (``--set 'lm_options={"max_iterations": 10}'``: ten Jacobian
+The LM budget. Table 8.12's header says "512 seeds, 10 iterations"; read as ten LM
+iterations per seed (``--set 'lm_options={"max_iterations": 10}'``: ten Jacobian
 evaluations) it does not reproduce the thesis: on six 20-label Ward scenes
 (``docs/results/lm_multiseed/readings/``) the best of 512 ten-iteration optima (by
 the LM error, 7.3.2 step 13) lay 0.256 ± 0.27 (0.063-0.626) from the truth (the full
-20-scene column: 0.275, worse than PMC (II)'s 0.140), while run to convergence on the
-same scenes and seeds it lay 0.025 ± 0.025 (0.007-0.070), near the PL maximiser. The thesis reports the converged behaviour: at 512
-seeds the error "reliably reaches a good minimum value", single runs find the
-parameters "within 0.015 units", and LM matches or beats PMC given its 20× longer
-running time (Table 8.12: 1.3-5 h per scene against PMC's 4-16 min; ten iterations
-would cost about as much as one PMC run, convergence ~10-20×). So the default,
-``lm_options = {}``, runs each seed to MINPACK's convergence (tolerances 1e-8); the
-ten-iteration reading's results are in ``docs/results/lm_multiseed_10it``. (Before
-Dec 2026 the budget was ``max_nfev = 40``, meant as 10 iterations of d + 1
-forward-difference evaluations; but scipy's lmder counts only the residual calls,
-so it allowed up to ~35 iterations.)
+20-scene column: 0.275, worse than PMC (II)'s 0.140), while run to convergence on
+the same scenes and seeds it lay 0.025 ± 0.025 (0.007-0.070), near the PL maximiser.
+The thesis reports the converged behaviour: at 512 seeds the error "reliably reaches
+a good minimum value", single runs find the parameters "within 0.015 units", and LM
+matches or beats PMC given its 20× longer running time (Table 8.12: 1.3-5 h per
+scene against PMC's 4-16 min; ten iterations would cost about as much as one PMC
+run, convergence ~10-20×). So the default, ``lm_options = {}``, runs each seed to
+MINPACK's convergence (tolerances 1e-8); the ten-iteration reading's results are in
+``docs/results/lm_multiseed_10it``. (Before Dec 2026 the budget was ``max_nfev =
+40``, meant as 10 iterations of d + 1 forward-difference evaluations; but scipy's
+lmder counts only the residual calls, so it allowed up to ~35 iterations.)
 
 Full run: 160 scenes (2 models × 4 label counts × 20) × 512 seeds run to
 convergence (50-100 thousand residual-and-Jacobian passes per scene) at 100×100

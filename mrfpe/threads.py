@@ -25,8 +25,7 @@ from contextlib import AbstractContextManager, contextmanager
 import numba
 
 __all__ = ["BLAS_THREADS", "MIN_EVALS_PER_THREAD", "blas_threads", "configure_vector_width",
-           "limit_threads", "thread_budget",
-           "vector_width"]
+           "limit_threads", "thread_budget", "vector_width"]
 
 #: Environment variable that turns the 512-bit preference off ("0", "off", "no", "false").
 OPT_OUT_ENV = "MRFPE_AVX512"

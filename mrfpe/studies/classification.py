@@ -187,6 +187,7 @@ def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
                 "thesis's counts (48 real surfaces) follow in italics. Materials: " +
                 ", ".join(f"{i}: {n}" for i, n in enumerate(MATERIAL_NAMES)) + "."]
     summary_rows, figs, ess_rows = [], [], []
+    lam = float(config.get("grid_power", 1.0))
     for brdf in config["brdf"]:
         group = [ds for ds in results if json.loads(ds.attrs["cell"])["brdf"] == brdf]
         cells = [json.loads(ds.attrs["cell"]) for ds in group]
@@ -195,7 +196,6 @@ def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
         group = [group[i] for i in order]
         classes = np.array([cells[i]["material"] for i in order])
         names = [str(p) for p in group[0]["param"].values]
-        lam = float(config.get("grid_power", 1.0))
         sets = {
             "unevolved": [_posterior(ds["grid_theta"].values,
                                      normalise_log_weights(lam * ds["grid_log_weight"].values),

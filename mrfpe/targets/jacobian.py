@@ -81,7 +81,6 @@ def _grad_nodes(coef, full, recT, nrecT, unaryT, obs, inv_sigma, n, a, b,
         sl = slice(i0, i1)
         en = np.empty((B, NB))
         g = np.empty((5, B, NB))
-        xs = np.empty((6, NB))  # one label's triangle exponentials (full form)
         mn = np.empty(NB)
         tot = np.empty(NB)
         acc = np.empty(NB)
@@ -106,6 +105,7 @@ def _grad_nodes(coef, full, recT, nrecT, unaryT, obs, inv_sigma, n, a, b,
                 qb = C1 * hb1[j] + C2 * hb2[j]
                 wa1[j], wa2[j] = qa * nga1[j], qa * nga2[j]
                 wb1[j], wb2[j] = qb * ngb1[j], qb * ngb2[j]
+            xs = np.empty((6, NB))  # one label's triangle exponentials
             x0, x1, x2, x3, x4, x5 = xs[0], xs[1], xs[2], xs[3], xs[4], xs[5]
             for s in range(B):
                 (u, a0, a1, a2, a3, f01, g01, f02, g02, f11, g11, f12, g12, f21, g21, f22, g22,

@@ -58,8 +58,13 @@ def _stem(cell: Mapping[str, Any], repeat: int) -> str:
 
 
 def tasks(study: Study, config: Mapping[str, Any]) -> list[Task]:
-    """Every trial of ``config`` (resolved), repetition-major, cells in grid order."""
-    base = {k: v for k, v in config.items() if k not in study.grid and k != "n_trials"}
+    """Every trial of ``config`` (resolved), repetition-major, cells in grid order.
+
+    A trial's config is ``config`` specialised to its cell, without ``n_trials`` and the
+    study's summary-only settings (:attr:`~mrfpe.study.Study.summary_keys`).
+    """
+    skip = {*study.grid, "n_trials", *study.summary_keys}
+    base = {k: v for k, v in config.items() if k not in skip}
     cells = [dict(zip(study.grid, vals)) for vals in product(*(config[k] for k in study.grid))]
     out = []
     for repeat in range(config["n_trials"]):

@@ -42,6 +42,10 @@ class Setting:
     check
         ``check(value)`` raising ``ValueError`` for a value of the right type
         that is still wrong (e.g. a non-positive size).
+    summary_only
+        Read by the summary alone (a reweighting, a table's reading): left out of
+        every trial's config and hash, so that changing it re-summarises the
+        trials on disk instead of computing them again.
     """
 
     name: str
@@ -49,6 +53,7 @@ class Setting:
     help: str = ""
     choices: Sequence[Any] | Callable[[], Iterable[Any]] | None = None
     check: Callable[[Any], None] | None = field(default=None, compare=False)
+    summary_only: bool = False
 
     @property
     def kind(self) -> str:
@@ -170,6 +175,11 @@ class Study:
             if s.name == name:
                 return s
         raise KeyError(name)
+
+    @property
+    def summary_keys(self) -> frozenset[str]:
+        """Names of the :attr:`Setting.summary_only` settings (not part of a trial's config)."""
+        return frozenset(s.name for s in self.settings if s.summary_only)
 
     @property
     def summary(self) -> str:

@@ -54,3 +54,28 @@ def test_cli_report(half_done, capsys):
     assert "summarised 2 trial(s) in 1 cell(s)" in capsys.readouterr().out
     assert main([*args[:2], "importance_sampling", "--out", str(out / "nothing")]) == 2
     assert "no complete cells" in capsys.readouterr().err
+
+
+def test_summary_only_settings_re_summarise_the_same_trials(tmp_path):
+    import dataclasses
+
+    seen = []
+
+    def summarise(results, config, out):
+        seen.append(config["label"])
+        return toy.STUDY.summarise(results, config, out)
+
+    label = S.Setting("label", "a", "read by the summary alone", summary_only=True)
+    study = dataclasses.replace(toy.STUDY, settings=[*toy.STUDY.settings, label],
+                                summarise=summarise)
+    assert study.summary_keys == {"label"}
+    cfg = S.resolve_config(study, overrides=SMALL)
+    assert S.run(study, cfg, tmp_path, progress=False).ok and seen == ["a"]
+    assert all("label" not in t.config for t in S.tasks(study, cfg))
+    other = S.resolve_config(study, overrides={**SMALL, "label": "b"})
+    assert [t.hash for t in S.tasks(study, other)] == [t.hash for t in S.tasks(study, cfg)]
+    s = S.summarise_existing(study, other, tmp_path)  # the same four files, summarised anew
+    assert s.n_trials == 4 and s.n_missing == 0 and seen[-1] == "b"
+    # a trial setting still separates configurations
+    seed = S.resolve_config(study, overrides={**SMALL, "seed": cfg["seed"] + 1})
+    assert S.tasks(study, seed)[0].hash != S.tasks(study, cfg)[0].hash

@@ -156,6 +156,21 @@ def test_tables_cached_and_template_fallback():
     assert block_size(1000, 20, 4) % 16 == 0 and block_size(1, 40, 8) == 16
 
 
+@pytest.mark.parametrize("n", [40, 1000])
+def test_values_do_not_depend_on_the_block(monkeypatch, n):
+    import mrfpe.targets.lean as lean
+
+    t = get("pls", _scene("phong", [0.5, 0.4, 0.3], "jagged"), dtype="float32")
+    x = np.random.default_rng(3).random((n, 3))
+    want = t.log_prob(x)
+    for bl in (16, 48, 1024):
+        monkeypatch.setattr(lean, "block_size", lambda n, b, i, bl=bl: bl)
+        assert np.array_equal(t.log_prob(x), want)
+    sizes = [block_size(k, b, i) for k in (1, 100, 1000, 5000) for b in (10, 40) for i in (4, 8)]
+    assert all(s % 16 == 0 and s <= lean.BLOCK_MAX for s in sizes)
+    assert block_size(1000, 20, 4) * 20 * 4 <= lean.BLOCK_BYTES
+
+
 def test_vector_width_opt_out_and_user_setting():
     code = ("import mrfpe.targets.kernels, mrfpe.threads as t, numba; "
             "print(t.configure_vector_width(), numba.config.CPU_FEATURES is None)")

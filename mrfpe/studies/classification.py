@@ -24,11 +24,12 @@ pictures). The thesis's posteriors used PL_3 on stereo reconstructions; ours
 use PL_s (7.7) on synthetic scenes, so only the pattern, not the counts, can
 be compared.
 
-Full run: about 0.7 h on two cores (one process per core). That is 96
+Full run: about 1 h on two cores (one process per core). That is 96
 specimens (2 models × 12 × 4) × (PMC 1000×20 + 512-seed LM of 10 iterations +
-1000 grid evaluations) at 100×100 pixels, measured at 37 s per 20-label Ward
-specimen on one core (AMD EPYC, Dec 2026), plus the pairwise distances of
-1000-point sets in the summary.
+1000 grid evaluations) at 100×100 pixels, measured at 37-45 s per 20-label Ward
+and ~75 s per Phong specimen on one core (AMD EPYC, Dec 2026), plus the
+summary's pairwise distances of 1000-point sets: 25 min on one core, most of it
+POT's exact EMD (``summary_jobs`` spreads the pair loops over the cores).
 
 The report opens with Kish's ESS of every feature set. With the thesis's
 settings both the grid set (weighted by a log-PL of order -10⁴) and PMC (II)'s
@@ -89,6 +90,11 @@ def _non_negatives(values: list) -> None:
 def _unit_power(value: float) -> None:
     if isinstance(value, bool) or not isinstance(value, int | float) or not 0 < value <= 1:
         raise ValueError(f"must be a number in (0, 1]; got {value!r}")
+
+
+def _jobs(value: int) -> None:
+    if value == 0:
+        raise ValueError(f"must be a positive count or -1 (all cores); got {value!r}")
 
 
 #: Powers λ of the report's sweep of the grid sets' ESS and spread (``grid_power`` joins them).
@@ -262,7 +268,7 @@ def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
                 if name == "lm512":
                     S = -cdist(lm_best, lm_best)
                 else:
-                    S = similarity_matrix(posts, name, **params)
+                    S = similarity_matrix(posts, name, n_jobs=config["summary_jobs"], **params)
                 matrices[(kind, label)] = S
                 st = error_stats(S, classes)
                 header.append(label)
@@ -354,6 +360,9 @@ STUDY = Study(
         Setting("extra_distances", ["matusita", "sliced_wasserstein"],
                 "further registered distances to tabulate", choices=_distance_names,
                 summary_only=True),
+        Setting("summary_jobs", -1, "joblib threads for the summary's pair loops (EMD, sliced "
+                "Wasserstein; -1 = all cores); the numbers do not depend on it",
+                check=_jobs, summary_only=True),
     ],
     check=check_target_options,
     quick={"brdf": ["ward"], "material": [0, 1, 4], "specimen": [0, 1], "shape": [12, 12],

@@ -76,13 +76,15 @@ def test_defaults_temper_the_grid_and_flatten_the_cloud():
 
     cfg = resolve_config(STUDY)
     assert cfg["grid_power"] == 1e-4 and cfg["evolved_weights"] == "uniform"
-    summary = {"grid_power", "evolved_weights", "agmmp_sigmas", "extra_distances"}
+    summary = {"grid_power", "evolved_weights", "agmmp_sigmas", "extra_distances", "summary_jobs"}
     assert STUDY.summary_keys == summary
     assert not summary & set(tasks(STUDY, cfg)[0].config)  # trial files serve every choice
 
 
-def test_grid_power_is_checked():
+def test_grid_power_and_jobs_are_checked():
     from mrfpe.study import resolve_config
 
     with pytest.raises(ValueError, match="grid_power"):
         resolve_config(STUDY, overrides=["grid_power=1.5"])
+    with pytest.raises(ValueError, match="summary_jobs"):
+        resolve_config(STUDY, overrides=["summary_jobs=0"])

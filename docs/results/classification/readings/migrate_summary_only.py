@@ -8,7 +8,7 @@ a trial's config leaves them out, so this rewrites each file's ``trial_config`` 
 stored hash is the hash of the stored config under the old rule, and that nothing
 else differs from the study's current trial config. Idempotent.
 
-    python docs/results/classification/readings/migrate_summary_only.py docs/results/classification/trials
+    cd docs/results/classification && python readings/migrate_summary_only.py trials
 """
 
 import json

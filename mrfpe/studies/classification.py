@@ -94,7 +94,8 @@ def _unit_power(value: float) -> None:
 
 def _jobs(value: int) -> None:
     if value == 0:
-        raise ValueError(f"must be a positive count or -1 (all cores); got {value!r}")
+        raise ValueError(f"must be a thread count, or negative as joblib reads it (-1 = all "
+                         f"cores); got {value!r}")
 
 
 #: Powers λ of the report's sweep of the grid sets' ESS and spread (``grid_power`` joins them).
@@ -170,14 +171,10 @@ _DIM = 3
 
 def _information(posts: list[xr.Dataset]) -> list[str]:
     """Median and min Kish ESS, count below ``10 * d``, median weighted sd (mean over axes)."""
-    from mrfpe.posterior import ess, normalise_log_weights
+    from mrfpe.posterior import ess, weighted_cov
 
     e = np.array([ess(p) for p in posts])
-    sd = []
-    for p in posts:
-        w = np.exp(normalise_log_weights(p["log_weight"].values))
-        th = p["theta"].values
-        sd.append(np.sqrt(w @ (th - w @ th) ** 2).mean())
+    sd = [np.sqrt(np.diag(weighted_cov(p))).mean() for p in posts]
     return [f"{np.median(e):.1f}", f"{e.min():.1f}", f"{int(np.sum(e < 10 * _DIM))} / {e.size}",
             f"{np.median(sd):.3f}"]
 

@@ -156,11 +156,11 @@ def test_tables_cached_and_template_fallback():
     assert block_size(1000, 20, 4) % 16 == 0 and block_size(1, 40, 8) == 16
 
 
-@pytest.mark.parametrize("n", [40, 1000])
-def test_values_do_not_depend_on_the_block(monkeypatch, n):
+@pytest.mark.parametrize("brdf,n", [("phong", 40), ("phong", 1000), ("ward", 300)])
+def test_values_do_not_depend_on_the_block(monkeypatch, brdf, n):
     import mrfpe.targets.lean as lean
 
-    t = get("pls", _scene("phong", [0.5, 0.4, 0.3], "jagged"), dtype="float32")
+    t = get("pls", _scene(brdf, [0.5, 0.4, 0.3], "jagged"), dtype="float32")
     x = np.random.default_rng(3).random((n, 3))
     want = t.log_prob(x)
     for bl in (16, 48, 1024):

@@ -42,10 +42,12 @@ trials (they are not part of a trial's config), make the sets informative:
   specimen's set has ESS ≥ 10 d (d = 3 parameters; measured on the full
   benchmark, Dec 2026), and the softening power PMC (II) itself runs at;
   λ = 1 is the thesis's weighting;
-* ``evolved_weights``: ``"uniform"`` (default) gives the final PMC cloud equal
-  weights, the particles being drawn around a population resampled by the
-  softened target; ``"sampler"`` keeps PMC (II)'s own final weights π (the
-  thesis's sets; ESS ≈ 1).
+* ``evolved_weights``: ``"uniform"`` gives the final PMC cloud equal weights,
+  the particles being drawn around a population resampled by the softened
+  target; ``"sampler"`` keeps the sampler's final weights (for PMC (II) its π,
+  the thesis's sets, ESS ≈ 1; for PMC (I) and ``mixture`` proper importance
+  weights). The default ``"auto"`` is uniform for PMC (II) (the study's
+  ``pmc`` setting) and the sampler's weights for the other variants.
 """
 
 from __future__ import annotations
@@ -101,7 +103,17 @@ def _jobs(value: int) -> None:
 #: Powers λ of the report's sweep of the grid sets' ESS and spread (``grid_power`` joins them).
 POWER_SWEEP = (1.0, 1e-2, 1e-3, 3e-4, 1e-4)
 #: Ways of weighting the final PMC cloud (``evolved_weights``).
-EVOLVED_WEIGHTS = ("uniform", "sampler")
+EVOLVED_WEIGHTS = ("auto", "uniform", "sampler")
+#: PMC variants whose final weights are not importance weights of the target (PMC (II)'s π).
+_NOT_IMPORTANCE = ("thesis2", "thesis2_literal")
+
+
+def _uniform_cloud(config: dict) -> bool:
+    """Whether the evolved sets get equal weights (``evolved_weights``; ``auto``: for PMC (II))."""
+    mode = config["evolved_weights"]
+    if mode == "auto":
+        return config["pmc"].get("variant", "mixture") in _NOT_IMPORTANCE
+    return mode == "uniform"
 
 MATERIAL_NAMES = ["shiny fabric", "shiny plastic", "laminated paper", "glossy brown paper",
                   "canvas", "smooth cloth", "fuzzy cloth", "t-shirt cloth",
@@ -239,7 +251,7 @@ def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
     summary_rows, figs, ess_rows = [], [], []
     lam = float(config["grid_power"])
     powers = sorted({*POWER_SWEEP, lam}, reverse=True)
-    uniform = config["evolved_weights"] == "uniform"
+    uniform = _uniform_cloud(config)
     for brdf in config["brdf"]:
         group = [ds for ds in results if json.loads(ds.attrs["cell"])["brdf"] == brdf]
         cells = [json.loads(ds.attrs["cell"]) for ds in group]
@@ -308,8 +320,8 @@ def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
                     "Patrick-Fisher, Mahalanobis) compare the spread of a few points, i.e. "
                     "noise. Unevolved sets against the power λ on their target weights, "
                     "evolved sets under their two weightings; ← marks the tables' setting "
-                    f"(`grid_power` = {lam:g}, `evolved_weights` = "
-                    f"{config['evolved_weights']}).\n\n" + markdown_table(
+                    f"(`grid_power` = {lam:g}, `evolved_weights` = {config['evolved_weights']}: "
+                    f"{'uniform' if uniform else 'sampler'}).\n\n" + markdown_table(
                         ["brdf", "set", "λ / weights", "median ESS", "min ESS",
                          f"ESS < {10 * _DIM}", "median sd"], ess_rows))
     sections += [f"![{f}]({f})" for f in figs]
@@ -349,9 +361,10 @@ STUDY = Study(
         Setting("grid_power", 1e-4, "power λ on the unevolved grid set's target weights "
                 "(p^λ on the uniform grid: an exact tempering; 1 is the thesis's weighting)",
                 check=_unit_power, summary_only=True),
-        Setting("evolved_weights", "uniform", "weights of the final PMC cloud: uniform, or "
-                "the sampler's own (PMC (II)'s π, the thesis's sets)", choices=EVOLVED_WEIGHTS,
-                summary_only=True),
+        Setting("evolved_weights", "auto", "weights of the final PMC cloud: uniform, the "
+                "sampler's own (for PMC (II) its π, the thesis's sets), or auto (uniform for "
+                "PMC (II), the sampler's importance weights for the other variants)",
+                choices=EVOLVED_WEIGHTS, summary_only=True),
         Setting("agmmp_sigmas", list(AGMMP_SIGMAS), "kernel widths of the AGMMP distance "
                 "columns", check=positive, summary_only=True),
         Setting("extra_distances", ["matusita", "sliced_wasserstein"],

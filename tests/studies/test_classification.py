@@ -75,7 +75,13 @@ def test_defaults_temper_the_grid_and_flatten_the_cloud():
     from mrfpe.study import resolve_config, tasks
 
     cfg = resolve_config(STUDY)
-    assert cfg["grid_power"] == 1e-4 and cfg["evolved_weights"] == "uniform"
+    assert cfg["grid_power"] == 1e-4 and cfg["evolved_weights"] == "auto"
+    from mrfpe.studies.classification import _uniform_cloud
+
+    assert _uniform_cloud(cfg)  # PMC (II): its pi are not importance weights
+    assert not _uniform_cloud({**cfg, "pmc": {"variant": "mixture"}})
+    assert not _uniform_cloud({**cfg, "pmc": {"n_samples": 10}})  # the sampler's default
+    assert not _uniform_cloud({**cfg, "evolved_weights": "sampler"})
     summary = {"grid_power", "evolved_weights", "agmmp_sigmas", "extra_distances", "summary_jobs"}
     assert STUDY.summary_keys == summary
     assert not summary & set(tasks(STUDY, cfg)[0].config)  # trial files serve every choice

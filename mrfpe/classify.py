@@ -221,8 +221,8 @@ def plot_similarity(S: Any, classes: Any, ax: Any = None, *, cmap: str = "viridi
     ticks = np.arange(0, n, step)
     ax.set_xticks(ticks, [str(order[t] + 1) for t in ticks], fontsize=7)
     ax.set_yticks(ticks, [str(order[t] + 1) for t in ticks], fontsize=7)
-    ax.set_xlabel("material")
-    ax.set_ylabel("material")
+    ax.set_xlabel("posterior (outlined: its class)")
+    ax.set_ylabel("posterior (outlined: its class)")
     if title:
         ax.set_title(title)
     if colorbar:

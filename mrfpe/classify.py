@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from mrfpe.validation import check_bool
+from mrfpe.validation import check_bool, check_n_jobs
 
 __all__ = [
     "confusion_matrix", "error_stats", "knn_accuracy", "knn_predict", "plot_similarity",
@@ -57,15 +57,14 @@ def similarity_matrix(posteriors: Sequence[Any], name: str, *, n_jobs: int = 1,
     posteriors = list(posteriors)
     if len(posteriors) < 1:
         raise ValueError("posteriors must hold at least one posterior")
-    if isinstance(n_jobs, bool) or not isinstance(n_jobs, int | np.integer) or n_jobs == 0:
-        raise ValueError(f"n_jobs must be a non-zero integer (-1 = all cores); got {n_jobs!r}")
+    n_jobs = check_n_jobs("n_jobs", n_jobs)
     measure = get(name)()
     if isinstance(measure, Distance):
-        d = measure.pairwise(posteriors, n_jobs=int(n_jobs), progress=progress, **params)
+        d = measure.pairwise(posteriors, n_jobs=n_jobs, progress=progress, **params)
         return np.asarray(measure.score(d), dtype=np.float64)
     # a plugin that does not derive from the base class: its distance form, negated
     d = pair_loop(lambda i, j: float(measure(posteriors[i], posteriors[j], **params)),
-                  len(posteriors), symmetric=bool(measure.symmetric), n_jobs=int(n_jobs),
+                  len(posteriors), symmetric=bool(measure.symmetric), n_jobs=n_jobs,
                   progress=progress, desc=name)
     return -d
 

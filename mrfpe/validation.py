@@ -14,8 +14,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["check_bool", "check_bounds", "check_choice", "check_keywords", "check_positive_int",
-           "check_range", "check_seed", "check_target", "keyword_names"]
+__all__ = ["check_bool", "check_bounds", "check_choice", "check_keywords", "check_n_jobs",
+           "check_positive_int", "check_range", "check_seed", "check_target", "keyword_names"]
 
 
 def check_positive_int(name: str, value: Any, minimum: int = 1) -> int:
@@ -50,6 +50,13 @@ def check_choice(name: str, value: Any, choices: tuple[str, ...]) -> str:
     if value not in choices:
         raise ValueError(f"{name} must be one of {', '.join(map(repr, choices))}; got {value!r}")
     return value
+
+
+def check_n_jobs(name: str, value: Any) -> int:
+    """Return a joblib worker count (non-zero; negative as joblib reads it, -1 = all cores)."""
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value == 0:
+        raise ValueError(f"{name} must be a non-zero integer (-1 = all cores); got {value!r}")
+    return int(value)
 
 
 def check_bool(name: str, value: Any) -> bool:

@@ -58,7 +58,7 @@ import xarray as xr
 
 from mrfpe._caller import stacklevel_outside_mrfpe
 from mrfpe.resampling import check_log_weights, normalise_log_weights
-from mrfpe.validation import check_bool
+from mrfpe.validation import check_bool, check_n_jobs
 
 __all__ = ["Distance", "SampleSet", "Similarity", "as_sample_sets", "check_bool"]
 
@@ -243,11 +243,10 @@ class Distance:
         if isinstance(posteriors, xr.Dataset | str) or not hasattr(posteriors, "__iter__"):
             raise ValueError(f"posteriors must be a sequence of posterior Datasets; got "
                              f"{type(posteriors).__name__}")
-        if isinstance(n_jobs, bool) or not isinstance(n_jobs, int | np.integer) or n_jobs == 0:
-            raise ValueError(f"n_jobs must be a non-zero integer (-1 = all cores); got {n_jobs!r}")
+        n_jobs = check_n_jobs("n_jobs", n_jobs)
         check_bool("progress", progress)
         feats, p = self.prepare(list(posteriors), **params)
-        return self.pairwise_features(feats, p, n_jobs=int(n_jobs), progress=progress)
+        return self.pairwise_features(feats, p, n_jobs=n_jobs, progress=progress)
 
     def pairwise_features(self, feats: Sequence[Any], p: dict[str, Any], *, n_jobs: int = 1,
                           progress: bool = False) -> np.ndarray:

@@ -70,6 +70,7 @@ from mrfpe.studies.synthetic import (
     settings,
 )
 from mrfpe.study import Setting, Study
+from mrfpe.validation import check_n_jobs
 
 
 def _brdf_names() -> tuple[str, ...]:
@@ -94,12 +95,6 @@ def _unit_power(value: float) -> None:
         raise ValueError(f"must be a number in (0, 1]; got {value!r}")
 
 
-def _jobs(value: int) -> None:
-    if value == 0:
-        raise ValueError(f"must be a thread count, or negative as joblib reads it (-1 = all "
-                         f"cores); got {value!r}")
-
-
 #: Powers λ of the report's sweep of the grid sets' ESS and spread (``grid_power`` joins them).
 POWER_SWEEP = (1.0, 1e-2, 1e-3, 3e-4, 1e-4)
 #: Ways of weighting the final PMC cloud (``evolved_weights``).
@@ -111,8 +106,10 @@ _NOT_IMPORTANCE = ("thesis2", "thesis2_literal")
 def _uniform_cloud(config: dict) -> bool:
     """Whether the evolved sets get equal weights (``evolved_weights``; ``auto``: for PMC (II))."""
     mode = config["evolved_weights"]
-    if mode == "auto":
-        return config["pmc"].get("variant", "mixture") in _NOT_IMPORTANCE
+    if mode == "auto":  # the variant the pmc options select, the sampler's default included
+        import mrfpe.samplers
+
+        return mrfpe.samplers.get("pmc")(**config["pmc"]).variant in _NOT_IMPORTANCE
     return mode == "uniform"
 
 MATERIAL_NAMES = ["shiny fabric", "shiny plastic", "laminated paper", "glossy brown paper",
@@ -259,15 +256,15 @@ def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
                                                          cells[i]["specimen"]))
         group = [group[i] for i in order]
         classes = np.array([cells[i]["material"] for i in order])
-        for power in powers:
+        grids = {power: [_grid_set(ds, power) for ds in group] for power in powers}
+        clouds = {flat: [_evolved_set(ds, flat) for ds in group] for flat in (False, True)}
+        for power, posts in grids.items():
             ess_rows.append([brdf, "unevolved", f"{power:g}" + (" ←" if power == lam else ""),
-                             *_information([_grid_set(ds, power) for ds in group])])
-        for flat in (False, True):
+                             *_information(posts)])
+        for flat, posts in clouds.items():
             ess_rows.append([brdf, "evolved", ("uniform" if flat else "sampler (π)")
-                             + (" ←" if flat == uniform else ""),
-                             *_information([_evolved_set(ds, flat) for ds in group])])
-        sets = {"unevolved": [_grid_set(ds, lam) for ds in group],
-                "evolved": [_evolved_set(ds, uniform) for ds in group]}
+                             + (" ←" if flat == uniform else ""), *_information(posts)])
+        sets = {"unevolved": grids[lam], "evolved": clouds[uniform]}
         lm_best = np.stack([ds["lm_best"].values for ds in group])
         matrices = {}
         for kind in ("unevolved", "evolved_agmmp", "evolved"):
@@ -372,7 +369,7 @@ STUDY = Study(
                 summary_only=True),
         Setting("summary_jobs", -1, "joblib threads for the summary's pair loops (EMD, sliced "
                 "Wasserstein; -1 = all cores); the numbers do not depend on it",
-                check=_jobs, summary_only=True),
+                check=lambda v: check_n_jobs("summary_jobs", v), summary_only=True),
     ],
     check=check_target_options,
     quick={"brdf": ["ward"], "material": [0, 1, 4], "specimen": [0, 1], "shape": [12, 12],

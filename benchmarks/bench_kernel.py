@@ -6,17 +6,19 @@ repeats, so a shared, noisy machine slows both alike.
 
 * ``ns/eval`` at N = 1000 (Ward and Phong, float32 and float64, 100 x 100, 20 labels)
   for the classic and the lean kernel, wall and CPU per thread, and the lean
-  kernel's distance to the **speed of light**. The lean Ward loop per particle and
-  label, counted in its float32 zmm code (``inspect_asm``, Dec 2026), runs 108 vector
-  arithmetic ops per 6.2 evaluations: 6 exp2 of 12 ops (the argument's multiply, max,
-  3 rounding adds, 5 FMAs, shift, integer add), ~22 for the four slot terms and the
-  FMA with ``1/sigma_b``, ~14 for the label log-sum-exp. That is 17 ops per evaluation
-  (:data:`OPS_PER_EVAL`), 9 of them multiplies or FMAs (:data:`FMA_OPS_PER_EVAL`).
+  kernel's distance to the **speed of light**. The lean Ward code per 16 particles and
+  one label, counted in its float32 AVX-512 code (``inspect_asm``, Dec 2026), runs 101
+  vector arithmetic ops per 6.2 evaluations: the label loop's 86 (6 exp2 of 10 ops --
+  the argument's FMA with log2 wF1, max, cvtps2dq, cvtdq2ps, subtraction, 5 FMAs,
+  vscalefps -- and 26 for the four slot terms and the FMA with ``1/sigma_b``), ~14 for
+  the label log-sum-exp and ~1 for the node's two fixed triangles. That is 16.3 ops per
+  evaluation (:data:`OPS_PER_EVAL`), 8.2 of them multiplies or FMAs
+  (:data:`FMA_OPS_PER_EVAL`); without AVX-512 each exp2 takes one op more.
   Intel's AVX-512 cores issue every 512-bit op on the same two ports, so the floor is
-  17 ops at the FMA rate; AMD Zen 4 has two FADD pipes beside its two FMA pipes, so
-  the floor is the larger of 9 ops at the FMA rate and 17 at twice it. The other
-  columns time the same kernels for one particle (``N=1``: an MCMC step), where the
-  lean family runs its nodes-as-SIMD kernel.
+  all ops at the FMA rate; AMD Zen 4 has two FADD pipes beside its two FMA pipes, so
+  the floor is the larger of the FMA-class ops at the FMA rate and all ops at twice it.
+  The other columns time the same kernels for one particle (``N=1``: an MCMC step),
+  where the lean family runs its nodes-as-SIMD kernel.
   The rate is measured (a numba loop of independent FMAs, per core, in the kernel's
   own precision and vector width) and also given from nominal figures: vector width
   from the ``avx512f`` flag in ``/proc/cpuinfo`` and LLVM's 256-bit preference
@@ -49,7 +51,7 @@ import numpy as np
 from benchmarks._common import append_results, command_line, machine, peak_memory
 
 #: Vector arithmetic ops per evaluation of the lean Ward loop, and how many are multiplies/FMAs.
-OPS_PER_EVAL, FMA_OPS_PER_EVAL = 17, 9
+OPS_PER_EVAL, FMA_OPS_PER_EVAL = 16.3, 8.2
 
 
 def _fma_kernel():

@@ -24,8 +24,8 @@ from contextlib import AbstractContextManager, contextmanager
 
 import numba
 
-__all__ = ["BLAS_THREADS", "MIN_EVALS_PER_THREAD", "blas_threads", "configure_vector_width",
-           "limit_threads", "thread_budget", "vector_width"]
+__all__ = ["BLAS_THREADS", "MIN_EVALS_PER_THREAD", "blas_threads", "compiled_features",
+           "configure_vector_width", "limit_threads", "thread_budget", "vector_width"]
 
 #: Environment variable that turns the 512-bit preference off ("0", "off", "no", "false").
 OPT_OUT_ENV = "MRFPE_AVX512"
@@ -139,6 +139,27 @@ def configure_vector_width() -> str:
             state = "512"
     _VECTOR_STATE["state"] = state
     return state
+
+
+def compiled_features() -> frozenset[str]:
+    """CPU features numba compiles for in this process (names without the ``+``).
+
+    ``NUMBA_CPU_FEATURES`` if set (by the user, or by :func:`configure_vector_width`);
+    nothing for a CPU named by ``NUMBA_CPU_NAME`` other than ``host`` (e.g. ``generic``
+    for a portable cache: its features are not known here, so no feature is assumed);
+    else the host's. Kernels that emit feature-specific code (AVX-512's ``vscalefps``
+    in :func:`mrfpe.targets.lean.exp2_32`) decide by this, so that code compiled for
+    a portable target never relies on the host.
+    """
+    import llvmlite.binding as ll
+
+    given = os.environ.get("NUMBA_CPU_FEATURES") or numba.config.CPU_FEATURES
+    if given:
+        return frozenset(f[1:] for f in given.split(",") if f.startswith("+"))
+    name = os.environ.get("NUMBA_CPU_NAME") or numba.config.CPU_NAME
+    if name and name != "host":
+        return frozenset()
+    return frozenset(k for k, on in ll.get_host_cpu_features().items() if on)
 
 
 def vector_width() -> int:

@@ -163,8 +163,8 @@ def _grad_nodes(coef, full, recT, nrecT, unaryT, obs, inv_sigma, n, a, b,
         else:
             na, nga, nb, ngb = nrecT[4, sl], nrecT[5, sl], nrecT[6, sl], nrecT[7, sl]
             for j in range(m):
-                ha1[j] = na[j] * exp2_64(E1 * nga[j])
-                hb1[j] = nb[j] * exp2_64(E1 * ngb[j])
+                ha1[j] = exp2_64(E1 * nga[j] + na[j])  # the Ward tables hold log2 wF1
+                hb1[j] = exp2_64(E1 * ngb[j] + nb[j])
                 wa1[j] = ha1[j] * nga[j]
                 wb1[j] = hb1[j] * ngb[j]
             for s in range(B):
@@ -172,12 +172,12 @@ def _grad_nodes(coef, full, recT, nrecT, unaryT, obs, inv_sigma, n, a, b,
                  e5) = label_rows_ward(recT, unaryT, s, sl)
                 es, g0s, g1s, g3s = en[s], g[0, s], g[1, s], g[3, s]  # dE/dc2, e2 = 0
                 for j in range(m):
-                    p0 = f0[j] * exp2_64(E1 * e0[j])
-                    p1 = f1[j] * exp2_64(E1 * e1[j])
-                    p2 = f2[j] * exp2_64(E1 * e2[j])
-                    p3 = f3[j] * exp2_64(E1 * e3[j])
-                    p4 = f4[j] * exp2_64(E1 * e4[j])
-                    p5 = f5[j] * exp2_64(E1 * e5[j])
+                    p0 = exp2_64(E1 * e0[j] + f0[j])
+                    p1 = exp2_64(E1 * e1[j] + f1[j])
+                    p2 = exp2_64(E1 * e2[j] + f2[j])
+                    p3 = exp2_64(E1 * e3[j] + f3[j])
+                    p4 = exp2_64(E1 * e4[j] + f4[j])
+                    p5 = exp2_64(E1 * e5[j] + f5[j])
                     s10 = p0 + p1
                     s11 = p2 + p3
                     s12 = ha1[j] + p4

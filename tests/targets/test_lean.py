@@ -54,6 +54,37 @@ def test_exp2_accuracy_floor_and_unbiased_float32():
     np.testing.assert_allclose(o64, 2.0 ** -512, rtol=1e-15)
 
 
+_EXP2_BITS = """
+import numpy as np, numba
+from mrfpe.targets.lean import SCALEF, fexp2
+@numba.njit(error_model="numpy")
+def m(x, out):
+    for i in range(x.shape[0]):
+        out[i] = fexp2(x[i])
+x = np.concatenate([np.random.default_rng(0).uniform(-70, 127, 200_000),
+                    [-64.0, -63.5, -0.5, 0.5, 126.5]]).astype(np.float32)
+o = np.empty_like(x)
+m(x, o)
+print(SCALEF, o.view(np.int32).astype(np.int64).sum(), int(o.view(np.int32)[::997].sum()))
+"""
+
+
+def test_exp2_scalings_give_the_same_bits():
+    """AVX-512's vscalefps and the integer exponent add: same k, r and p, so the same bits."""
+    from mrfpe.targets.lean import SCALEF
+    from mrfpe.threads import compiled_features
+
+    assert SCALEF == ({"avx512f", "avx512vl"} <= compiled_features())
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("NUMBA_CPU", "MRFPE_"))}
+    here = subprocess.run([sys.executable, "-c", _EXP2_BITS], env=env, capture_output=True,
+                          text=True, check=True).stdout.split()
+    generic = subprocess.run([sys.executable, "-c", _EXP2_BITS],
+                             env={**env, "NUMBA_CPU_NAME": "generic"}, capture_output=True,
+                             text=True, check=True).stdout.split()
+    assert generic[0] == "False"  # a named CPU's features are not assumed
+    assert here[1:] == generic[1:]
+
+
 def test_growing_exponents_go_to_the_classic_kernel():
     from mrfpe.targets.dispatch import pl_terms  # noqa: F401  (the rule lives there)
     from mrfpe.targets.lean import HI32, exponent_bound
@@ -66,6 +97,10 @@ def test_growing_exponents_go_to_the_classic_kernel():
     assert exponent_bound(lt, decaying) <= 0 < HI32
     growing = np.array([[-30.0, 0.0], [1e6, 0.0]])  # not a Ward lobe: the bound says so
     assert exponent_bound(lt, growing) > HI32
+    # the Ward tables hold log2 wF1, folded into the exponent: the bound includes it
+    assert np.isfinite(lt.log_f_max) and exponent_bound(lt, np.zeros((1, 2))) == lt.log_f_max
+    lam = lean_tables(get("pls", _scene("lambertian", [0.7], "smooth"))._tables, False)
+    assert lam.log_f_max == -np.inf  # no lobe at all: every weight is 0
 
 
 def _scene(brdf, u, surface, shape=(9, 11), n_labels=7, seed=3):

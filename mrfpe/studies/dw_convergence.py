@@ -12,16 +12,18 @@ What we add: the same curve for the distance to the target's global
 maximiser. Both samplers run on the same scene in one trial; the trace is kept
 at steps 1-10 and then every ``record_stride`` steps.
 
-Full run: about 8 h on two cores (one process per core), in float32 (the
+Full run: about 10 h on two cores (one process per core), in float32 (the
 default, as in ``pmc_convergence``: ``log_prob`` within 2e-6 relative, a few
 1e-2 nats at these lattices' values, far below the acceptance ratios' scale).
 That is 800 scenes (2 models × 4 label counts × 100) × 2 samplers × 20000
 single-point evaluations at 100×100 pixels plus a maximiser per scene; measured
 on a 2-core AMD EPYC (Zen 4, Dec 2026) with the nodes-as-SIMD small-batch
 kernel: 1.2-1.4 ms per step at 20 Ward labels on one core (0.86 ms of it the
-evaluation), about 60 s per 20-label Ward scene; time grows about linearly
-with the labels, Phong's scenes cost about 1.3× Ward's. ``--trials 10`` gives
-usable curves in under an hour.
+evaluation, which reads the whole table once per step: memory-bound), 68 s per
+20-label Ward scene (median of the 100 committed, each run beside another study on
+the other core); time grows about linearly with the labels, Phong's scenes cost
+about 1.3× Ward's: about 21 core-hours. ``--trials 10`` gives usable curves in
+about an hour.
 """
 
 from __future__ import annotations

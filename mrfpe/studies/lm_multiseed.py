@@ -29,11 +29,12 @@ lmder counts only the residual calls, so it allowed up to ~35 iterations.)
 
 Full run: 160 scenes (2 models × 4 label counts × 20) × 512 seeds run to
 convergence (50-100 thousand residual-and-Jacobian passes per scene) at 100×100
-pixels plus a maximiser per scene: 4-8 min per 20-label Ward scene on one core of
-the 2-core AMD EPYC (Dec 2026; ~3 ms per pass), time growing about linearly with the
-labels and Phong's full-form Jacobian costing about twice Ward's: about 6 h on two
-cores. Ten iterations per seed: ~25 s per 20-label Ward scene. The thesis needed
-1.3-5 h per scene.
+pixels plus a maximiser per scene: 3.4-12 min per 20-label Ward scene on one core of
+the 2-core AMD EPYC (Dec 2026; ~3 ms per pass; median 5.2 min over the 20 committed
+scenes, each run beside another study on the other core), time growing about linearly
+with the labels and Phong's full-form Jacobian costing about twice Ward's: about
+26 core-hours (13 h on two cores). Ten iterations per seed: ~25 s per
+20-label Ward scene. The thesis needed 1.3-5 h per scene.
 """
 
 from __future__ import annotations

@@ -141,7 +141,7 @@ def exp2_32(x):
 
     * with AVX-512 (:data:`SCALEF`): ``k`` by ``cvtps2dq``, ``r`` by ``cvtdq2ps`` and a
       subtraction, the scaling by ``vscalefps`` -- 4 ops besides the polynomial, off
-      the integer pipes (0.92-0.94x the kernel's time on Zen 4);
+      the integer pipes (0.94-0.97x the Ward float32 kernel's time on Zen 4);
     * elsewhere: adding ``1.5 * 2^23`` leaves ``k`` in the low mantissa bits (two
       float ops give ``r``), and ``k << 23`` added to the bits of ``p`` scales it --
       an integer add where a multiply would need an FMA port.

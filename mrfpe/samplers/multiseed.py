@@ -22,12 +22,14 @@ conformance moment check, ``diagnose`` and the distances recognise.
 
 from __future__ import annotations
 
+import threading
+from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
 
 from mrfpe.samplers.base import Callback, Sampler, check_choice, check_positive_int, check_range
-from mrfpe.samplers.kit import Run, check_seed, check_target, grid
+from mrfpe.samplers.kit import Run, check_seed, check_target, grid, map_batched
 
 __all__ = ["LMMultiSeed", "NLoptMultiSeed", "seed_points"]
 
@@ -86,6 +88,12 @@ class _MultiSeed(Sampler):
     def _prepare(self, target: Any, bounds: np.ndarray) -> None:
         """Check target requirements before any evaluation (override)."""
 
+    def _optimise_all(self, target: Any, starts: np.ndarray, run: Run, bounds: np.ndarray,
+                      rng: np.random.Generator) -> Iterator[tuple[np.ndarray, dict[str, float]]]:
+        """Each seed's ``(optimum, stats)`` in seed order (override to run them together)."""
+        for x0 in starts:
+            yield self._optimise(target, x0, run, bounds, rng)
+
     def run(self, target: Any, *, seed: int | None, progress: bool = False,
             callback: Callback | None = None):
         """Optimise from every seed point and return the posterior Dataset."""
@@ -98,8 +106,7 @@ class _MultiSeed(Sampler):
         opt = np.empty_like(starts)
         lt = np.empty(starts.shape[0])
         info: dict[str, list[float]] = {}
-        for i, x0 in enumerate(starts):
-            x, stats = self._optimise(target, x0, run, bounds, rng)
+        for i, (x, stats) in enumerate(self._optimise_all(target, starts, run, bounds, rng)):
             opt[i] = np.clip(x, bounds[:, 0], bounds[:, 1])
             lt[i] = run.evaluate(target, opt[i:i + 1])[0]
             run.offer(opt[i:i + 1], lt[i:i + 1])
@@ -164,14 +171,23 @@ class LMMultiSeed(_MultiSeed):
         the trial steps that follow it; the seed's optimum is the iterate at which
         the next Jacobian is asked for (``status`` 0 then, scipy's code for a spent
         budget).
+    concurrent_seeds : int
+        Seeds optimised at once, each MINPACK run in a thread of its own, their
+        residual-and-Jacobian points evaluated together in one kernel pass
+        (:func:`mrfpe.samplers.kit.map_batched`) -- with the analytic Jacobian only.
+        A pass over one point reads the whole table (memory-bound); K points in one
+        pass share that read. Every seed sees the numbers it would see alone, so the
+        optima are the same, bit for bit, as with 1 (one seed at a time).
     """
 
     name = "lm_multiseed"
 
     def __init__(self, n_seeds: int = 512, seed_grid: str = "even", transform: str = "sine",
                  jacobian: str = "batched", ftol: float = 1e-8, xtol: float = 1e-8,
-                 gtol: float = 1e-8, max_nfev: int = 0, max_iterations: int = 0):
+                 gtol: float = 1e-8, max_nfev: int = 0, max_iterations: int = 0,
+                 concurrent_seeds: int = 32):
         self._check_common(n_seeds, seed_grid)
+        self.concurrent_seeds = check_positive_int("concurrent_seeds", concurrent_seeds)
         self.transform = check_choice("transform", transform, ("sine", "clip"))
         self.jacobian = check_choice("jacobian", jacobian, ("batched", "minpack"))
         self.ftol = check_range("ftol", ftol, 0.0, 1.0, high_open=True)
@@ -198,35 +214,85 @@ class LMMultiSeed(_MultiSeed):
             return np.arcsin(np.clip(2.0 * (x - lo) / (hi - lo) - 1.0, -1.0, 1.0))
         return x.copy()
 
+    def _analytic_rows(self, target: Any, zs: np.ndarray, lo: np.ndarray,
+                       hi: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Residuals and their Jacobian in z at each row of ``zs`` (K, d), in one kernel pass.
+
+        Row by row the numbers are those of a single-point call
+        (:func:`mrfpe.targets.jacobian.residuals_and_jacobians`), so batching seeds
+        changes no optimum.
+        """
+        from mrfpe.targets import jacobian as _jac
+
+        r, jt = _jac.residuals_and_jacobians(target, self._to_theta(zs, lo, hi))
+        rows = []
+        for q, z in enumerate(zs):
+            dth = (0.5 * (hi - lo) * np.cos(z) if self.transform == "sine"
+                   else ((z >= lo) & (z <= hi)).astype(float))
+            ok = np.isfinite(r[q])
+            rows.append((np.where(ok, r[q], NONFINITE_RESIDUAL),
+                         np.where(ok[:, None], jt[q] * dth[None, :], 0.0)))
+        return rows
+
+    def _optimise_all(self, target: Any, starts: np.ndarray, run: Run, bounds: np.ndarray,
+                      rng: np.random.Generator) -> Iterator[tuple[np.ndarray, dict[str, float]]]:
+        """The seeds one at a time, or ``concurrent_seeds`` at a time with their
+        residual-and-Jacobian passes batched (:func:`mrfpe.samplers.kit.map_batched`)."""
+        import numba
+
+        from mrfpe.targets import jacobian as _jac
+        from mrfpe.threads import limit_threads
+
+        cost = float(getattr(target, "cost", 1.0))
+        lo, hi = bounds[:, 0], bounds[:, 1]
+        lock = threading.Lock()  # one kernel call at a time: the caller's between seeds too
+        if self.concurrent_seeds > 1 and self.jacobian == "batched" and _jac.supports(target):
+            threads = numba.get_num_threads()  # numba's setting is per thread: carry it over
+
+            def batch(zs: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+                with lock, limit_threads(threads):
+                    return self._analytic_rows(target, zs, lo, hi)
+
+            results = map_batched(
+                lambda x0, rows: self._optimise(target, x0, run, bounds, rng, rows),
+                starts, batch, self.concurrent_seeds)
+        else:
+            results = (self._optimise(target, x0, run, bounds, rng) for x0 in starts)
+        for x, stats in results:
+            run.n_evals += cost * stats["n_evals"]
+            with lock:  # held while the caller evaluates this optimum
+                yield x, stats
+
     def _optimise(self, target: Any, x0: np.ndarray, run: Run, bounds: np.ndarray,
-                  rng: np.random.Generator) -> tuple[np.ndarray, dict[str, float]]:
+                  rng: np.random.Generator, rows: Any = None,
+                  ) -> tuple[np.ndarray, dict[str, float]]:
+        """One seed's LM. ``rows(z)``: the residuals and Jacobian at z (None: computed
+        here). Counts its residual evaluations in ``stats["n_evals"]``; the caller adds
+        them to ``run``, so that concurrent seeds do not race on the count."""
         from scipy.optimize import least_squares
 
+        from mrfpe.targets import jacobian as _jac
+
         lo, hi = bounds[:, 0], bounds[:, 1]
-        cost = float(getattr(target, "cost", 1.0))
-        start = run.n_evals
+        count = [0]
         last: dict[str, np.ndarray] = {}
 
         def residuals(zs: np.ndarray) -> np.ndarray:  # (k, d) -> (k, m), one batched call
-            run.n_evals += cost * zs.shape[0]
+            count[0] += zs.shape[0]
             r = np.asarray(target.residuals(self._to_theta(zs, lo, hi)), dtype=np.float64)
             r = r.reshape(zs.shape[0], -1)
             return np.where(np.isfinite(r), r, NONFINITE_RESIDUAL)
 
-        from mrfpe.targets import jacobian as _jac
-
         analytic = self.jacobian == "batched" and _jac.supports(target)
+        if analytic and rows is None:
+            def rows(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                return self._analytic_rows(target, z[None, :], lo, hi)[0]
 
         def fun(z: np.ndarray) -> np.ndarray:
             if analytic:  # residuals and their analytic Jacobian in one kernel pass
-                run.n_evals += cost
-                th = self._to_theta(z[None, :], lo, hi)[0]
-                r, jt = _jac.residuals_and_jacobian(target, th)
-                dth = (0.5 * (hi - lo) * np.cos(z) if self.transform == "sine"
-                       else ((z >= lo) & (z <= hi)).astype(float))
-                ok = np.isfinite(r)
-                last["z"], last["r"] = z.copy(), np.where(ok, r, NONFINITE_RESIDUAL)
-                last["J"] = np.where(ok[:, None], jt * dth[None, :], 0.0)
+                count[0] += 1
+                last["z"] = z.copy()
+                last["r"], last["J"] = rows(z)
                 return last["r"]
             last["z"], last["r"] = z.copy(), residuals(z[None, :])[0]
             return last["r"]
@@ -244,9 +310,9 @@ class LMMultiSeed(_MultiSeed):
             r0 = last["r"] if "z" in last and np.array_equal(last["z"], z) else fun(z)
             h = _FD_STEP * np.where(z == 0.0, 1.0, np.abs(z))
             zs = z[None, :] + np.diag(h)
-            rows = (residuals(zs) if self.jacobian == "batched"
-                    else np.vstack([residuals(zs[j:j + 1]) for j in range(z.size)]))
-            return ((rows - r0) / h[:, None]).T
+            rows_fd = (residuals(zs) if self.jacobian == "batched"
+                       else np.vstack([residuals(zs[j:j + 1]) for j in range(z.size)]))
+            return ((rows_fd - r0) / h[:, None]).T
 
         n_jac = [0]
         z0 = self._to_z(x0, lo, hi)
@@ -263,8 +329,7 @@ class LMMultiSeed(_MultiSeed):
             z = stop.z
             r = last["r"] if np.array_equal(last["z"], z) else fun(z)
             lm_cost, status = 0.5 * float(r @ r), 0.0  # 0: the budget ran out (scipy's code)
-        return self._to_theta(z, lo, hi), {"lm_cost": lm_cost,
-                                           "n_evals": (run.n_evals - start) / cost,
+        return self._to_theta(z, lo, hi), {"lm_cost": lm_cost, "n_evals": float(count[0]),
                                            "status": status}
 
 

@@ -56,3 +56,19 @@ def test_lm_multiseed_same_optima_with_analytic_jacobian(monkeypatch):
     # (1e-16 changes in the values move forward differences' path that much)
     assert abs(new["map_log_target"].values[-1] - old["map_log_target"].values[-1]) <= 5e-5 * abs(
         old["map_log_target"].values[-1])
+
+
+@pytest.mark.parametrize("brdf,u", [("ward", [0.7, 0.4, 0.45]),
+                                    ("phong_aniso", [0.5, 0.4, 0.3, 0.5])])
+def test_batched_rows_are_the_single_point_calls_bit_for_bit(brdf, u):
+    # more nodes than a block: the particles loop inside each node block
+    s = make_scene(brdf=brdf, theta=B.get(brdf).to_natural(np.array(u)), shape=(25, 23),
+                   n_labels=5, surface="jagged", seed=3)
+    t = get("pls", s)
+    x = np.random.default_rng(1).uniform(0.1, 0.9, (6, len(u)))
+    r, jr = J.residuals_and_jacobians(t, x)
+    assert r.shape == (6, t._tables.n_nodes) and jr.shape == (6, t._tables.n_nodes, len(u))
+    for q in range(6):
+        r1, j1 = J.residuals_and_jacobian(t, x[q])
+        np.testing.assert_array_equal(r[q], r1)
+        np.testing.assert_array_equal(jr[q], j1)

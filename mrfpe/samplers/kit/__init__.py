@@ -61,6 +61,9 @@ Importance functions
 Weights and resampling
     :func:`resample`, :data:`RESAMPLING_METHODS`, :func:`ess`,
     :func:`normalise_log_weights`, :func:`log_ratio`, :func:`perplexity`.
+Concurrent optimisations
+    :func:`map_batched` (multi-start local optimisers whose inner loop asks for one
+    point at a time: threads, one batched evaluation when all wait).
 """
 
 from __future__ import annotations
@@ -68,6 +71,7 @@ from __future__ import annotations
 from mrfpe.mixture import log_mixture_density
 from mrfpe.resampling import METHODS as RESAMPLING_METHODS
 from mrfpe.resampling import ess, log_ratio, normalise_log_weights, perplexity, resample
+from mrfpe.samplers.kit.batching import map_batched
 from mrfpe.samplers.kit.chains import ESS_CHECKPOINTS, KeptStates, check_chain_length
 from mrfpe.samplers.kit.draws import draw_in_support, grid, space_filling
 from mrfpe.samplers.kit.evidence import (
@@ -128,6 +132,7 @@ __all__ = [
     "log_mixture_density_chol",
     "log_ratio",
     "log_resampling_mixture",
+    "map_batched",
     "normalise_log_weights",
     "partition_or_none",
     "perplexity",

@@ -33,8 +33,10 @@ pixels plus a maximiser per scene: 3.4-12 min per 20-label Ward scene on one cor
 the 2-core AMD EPYC (Dec 2026; ~3 ms per pass; median 5.2 min over the 20 committed
 scenes, each run beside another study on the other core), time growing about linearly
 with the labels and Phong's full-form Jacobian costing about twice Ward's: about
-26 core-hours (13 h on two cores). Ten iterations per seed: ~25 s per
-20-label Ward scene. The thesis needed 1.3-5 h per scene.
+26 core-hours one seed at a time, about 17 (8-9 h on two cores) with the 32 concurrent
+seeds of ``lm_multiseed``'s default (measured 1.5× faster on one 20-label Ward scene,
+the optima bit for bit the same). Ten iterations per seed: ~25 s per 20-label Ward
+scene. The thesis needed 1.3-5 h per scene.
 """
 
 from __future__ import annotations

@@ -45,6 +45,8 @@ the number of threads.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from llvmlite import ir
 from numba import njit, prange, types
@@ -69,44 +71,28 @@ N_FEATURES = 5
 _FM = {"contract", "nsz"}
 
 
-@intrinsic
-def _f64_as_i64(typingctx, x):
-    sig = types.int64(types.float64)
+def _unary_intrinsic(sig: Any, emit: Any) -> Any:
+    """A one-argument numba intrinsic of signature ``sig`` whose LLVM code is
+    ``emit(builder, x)`` (bit casts, conversions, LLVM's math intrinsics)."""
 
-    def codegen(context, builder, signature, args):
-        return builder.bitcast(args[0], ir.IntType(64))
+    def typer(typingctx: Any, x: Any) -> Any:
+        def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+            return emit(builder, args[0])
 
-    return sig, codegen
+        return sig, codegen
 
-
-@intrinsic
-def _i64_as_f64(typingctx, x):
-    sig = types.float64(types.int64)
-
-    def codegen(context, builder, signature, args):
-        return builder.bitcast(args[0], ir.DoubleType())
-
-    return sig, codegen
+    return intrinsic(typer)
 
 
-@intrinsic
-def _f32_as_i32(typingctx, x):
-    sig = types.int32(types.float32)
-
-    def codegen(context, builder, signature, args):
-        return builder.bitcast(args[0], ir.IntType(32))
-
-    return sig, codegen
+def _bitcast(ty: Any) -> Any:
+    return lambda builder, x: builder.bitcast(x, ty)
 
 
-@intrinsic
-def _i32_as_f32(typingctx, x):
-    sig = types.float32(types.int32)
-
-    def codegen(context, builder, signature, args):
-        return builder.bitcast(args[0], ir.FloatType())
-
-    return sig, codegen
+# the float bits as an integer and back: the exp/log kernels' exponent arithmetic
+_f64_as_i64 = _unary_intrinsic(types.int64(types.float64), _bitcast(ir.IntType(64)))
+_i64_as_f64 = _unary_intrinsic(types.float64(types.int64), _bitcast(ir.DoubleType()))
+_f32_as_i32 = _unary_intrinsic(types.int32(types.float32), _bitcast(ir.IntType(32)))
+_i32_as_f32 = _unary_intrinsic(types.float32(types.int32), _bitcast(ir.FloatType()))
 
 
 _LOG2E = 1.4426950408889634

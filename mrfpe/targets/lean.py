@@ -58,7 +58,15 @@ from numba.core import cgutils
 from numba.extending import intrinsic, overload
 
 from mrfpe.targets.energy import DataTables
-from mrfpe.targets.kernels import _FM, _f32_as_i32, _f64_as_i64, _i32_as_f32, _i64_as_f64, flog
+from mrfpe.targets.kernels import (
+    _FM,
+    _f32_as_i32,
+    _f64_as_i64,
+    _i32_as_f32,
+    _i64_as_f64,
+    _unary_intrinsic,
+    flog,
+)
 from mrfpe.threads import compiled_features
 
 __all__ = ["BLOCK_BYTES", "BLOCK_MAX", "HI32", "HI64", "LOG2E", "NODE_BLOCK", "SCALEF",
@@ -92,41 +100,30 @@ _LO64, HI64 = -512.0, 1023.0
 SCALEF = {"avx512f", "avx512vl"} <= compiled_features()
 
 
-@intrinsic
-def _lrint_f32(typingctx, x):
-    """``round(x)`` to int32 in the current (nearest-even) mode: one ``cvtps2dq``."""
-    sig = types.int32(types.float32)
-
-    def codegen(context, builder, signature, args):
-        fn = cgutils.get_or_insert_function(
-            builder.module, ir.FunctionType(ir.IntType(32), [ir.FloatType()]), "llvm.lrint.i32.f32")
-        return builder.call(fn, args)
-
-    return sig, codegen
+def _call_llvm(name: str, ret: ir.Type, *args: ir.Type):
+    """An ``emit`` for :func:`~mrfpe.targets.kernels._unary_intrinsic`: call LLVM's ``name``."""
+    fnty = ir.FunctionType(ret, list(args))
+    return lambda builder, *xs: builder.call(
+        cgutils.get_or_insert_function(builder.module, fnty, name), list(xs))
 
 
-@intrinsic
-def _i32_to_f32(typingctx, k):
-    """``float32(k)`` (``cvtdq2ps``; LLVM shares it with :func:`_ldexp_f32`'s own)."""
-    sig = types.float32(types.int32)
-
-    def codegen(context, builder, signature, args):
-        return builder.sitofp(args[0], ir.FloatType())
-
-    return sig, codegen
+#: ``round(x)`` to int32 in the current (nearest-even) mode: one ``cvtps2dq``.
+_lrint_f32 = _unary_intrinsic(types.int32(types.float32),
+                             _call_llvm("llvm.lrint.i32.f32", ir.IntType(32), ir.FloatType()))
+#: ``float32(k)`` (``cvtdq2ps``; LLVM shares it with :func:`_ldexp_f32`'s own).
+_i32_to_f32 = _unary_intrinsic(types.float32(types.int32),
+                              lambda builder, k: builder.sitofp(k, ir.FloatType()))
 
 
 @intrinsic
 def _ldexp_f32(typingctx, x, k):
     """``x * 2^k`` (``llvm.ldexp``: ``vscalefps`` on AVX-512, a libm call elsewhere)."""
-    sig = types.float32(types.float32, types.int32)
+    emit = _call_llvm("llvm.ldexp.f32.i32", ir.FloatType(), ir.FloatType(), ir.IntType(32))
 
     def codegen(context, builder, signature, args):
-        fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(
-            ir.FloatType(), [ir.FloatType(), ir.IntType(32)]), "llvm.ldexp.f32.i32")
-        return builder.call(fn, args)
+        return emit(builder, *args)
 
-    return sig, codegen
+    return types.float32(types.float32, types.int32), codegen
 
 
 @njit(inline="always", fastmath=_FM, error_model="numpy", cache=True)

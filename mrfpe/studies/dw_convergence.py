@@ -19,7 +19,8 @@ That is 800 scenes (2 models × 4 label counts × 100) × 2 samplers × 20000
 single-point evaluations at 100×100 pixels plus a maximiser per scene; measured
 on a 2-core AMD EPYC (Zen 4, Dec 2026) with the nodes-as-SIMD small-batch
 kernel: 1.2-1.4 ms per step at 20 Ward labels on one core (0.86 ms of it the
-evaluation, which reads the whole table once per step: memory-bound), 68 s per
+evaluation; two points in one call cost 1.5 ms, so running the two chains side by
+side would save little), 68 s per
 20-label Ward scene (median of the 100 committed, each run beside another study on
 the other core); time grows about linearly with the labels, Phong's scenes cost
 about 1.3× Ward's: about 21 core-hours. ``--trials 10`` gives usable curves in

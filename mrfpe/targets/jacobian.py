@@ -66,8 +66,8 @@ def _grad_nodes(coef, full, recT, nrecT, unaryT, obs, inv_sigma, n, a, b,
     depend on the label count; ``unaryT`` and ``inv_sigma`` in log2 units, ``coef``
     (5, K) float64 with ``e1, e2`` times log2 e; float64 whatever the tables' precision.
     Each block runs its particles one after another, so a block's tables are read from
-    memory once for all K (a pass over one particle reads the whole table: memory-bound)
-    and every particle's numbers are the same whatever K.
+    memory once for all K (from L2 after the first), and every particle's numbers are
+    the same whatever K.
     Rows are bound as 1-D slices indexed from 0 (unit strides, no negative-index
     wraparound), so numba's code loads vectors, not gathers.
     """

@@ -247,7 +247,8 @@ class LMMultiSeed(_MultiSeed):
         cost = float(getattr(target, "cost", 1.0))
         lo, hi = bounds[:, 0], bounds[:, 1]
         lock = threading.Lock()  # one kernel call at a time: the caller's between seeds too
-        if self.concurrent_seeds > 1 and self.jacobian == "batched" and _jac.supports(target):
+        analytic = self.jacobian == "batched" and _jac.supports(target)
+        if analytic and self.concurrent_seeds > 1:
             threads = numba.get_num_threads()  # numba's setting is per thread: carry it over
 
             def batch(zs: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -258,7 +259,11 @@ class LMMultiSeed(_MultiSeed):
                 lambda x0, rows: self._optimise(target, x0, run, bounds, rng, rows),
                 starts, batch, self.concurrent_seeds)
         else:
-            results = (self._optimise(target, x0, run, bounds, rng) for x0 in starts)
+            def one(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                return self._analytic_rows(target, z[None, :], lo, hi)[0]
+
+            results = (self._optimise(target, x0, run, bounds, rng, one if analytic else None)
+                       for x0 in starts)
         for x, stats in results:
             run.n_evals += cost * stats["n_evals"]
             with lock:  # held while the caller evaluates this optimum
@@ -267,12 +272,11 @@ class LMMultiSeed(_MultiSeed):
     def _optimise(self, target: Any, x0: np.ndarray, run: Run, bounds: np.ndarray,
                   rng: np.random.Generator, rows: Any = None,
                   ) -> tuple[np.ndarray, dict[str, float]]:
-        """One seed's LM. ``rows(z)``: the residuals and Jacobian at z (None: computed
-        here). Counts its residual evaluations in ``stats["n_evals"]``; the caller adds
-        them to ``run``, so that concurrent seeds do not race on the count."""
+        """One seed's LM. ``rows(z)``: the residuals and their analytic Jacobian at z
+        (None: forward differences of ``target.residuals``). Counts its residual
+        evaluations in ``stats["n_evals"]``; the caller adds them to ``run``, so that
+        concurrent seeds do not race on the count."""
         from scipy.optimize import least_squares
-
-        from mrfpe.targets import jacobian as _jac
 
         lo, hi = bounds[:, 0], bounds[:, 1]
         count = [0]
@@ -284,10 +288,7 @@ class LMMultiSeed(_MultiSeed):
             r = r.reshape(zs.shape[0], -1)
             return np.where(np.isfinite(r), r, NONFINITE_RESIDUAL)
 
-        analytic = self.jacobian == "batched" and _jac.supports(target)
-        if analytic and rows is None:
-            def rows(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-                return self._analytic_rows(target, z[None, :], lo, hi)[0]
+        analytic = rows is not None
 
         def fun(z: np.ndarray) -> np.ndarray:
             if analytic:  # residuals and their analytic Jacobian in one kernel pass

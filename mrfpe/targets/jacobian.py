@@ -264,7 +264,7 @@ def node_terms_and_jacobian(target: Any, theta: np.ndarray) -> tuple[np.ndarray,
     ``target`` is a BRDF pseudolikelihood target for which :func:`supports` holds;
     the terms equal ``target.node_terms(theta[None])[0]``.
     """
-    val, jac = node_terms_and_jacobians(target, np.asarray(theta, dtype=np.float64)[None])
+    val, jac = node_terms_and_jacobians(target, np.asarray(theta, dtype=np.float64).reshape(1, -1))
     return val[0], jac[0]
 
 
@@ -306,7 +306,8 @@ def residuals_and_jacobian(target: Any, theta: np.ndarray,
     Same clipping as :func:`mrfpe.targets.residuals.transform`; where a residual is
     clipped (or infinite) its row of the Jacobian is 0.
     """
-    r, jac = residuals_and_jacobians(target, np.asarray(theta, dtype=np.float64)[None], kind)
+    r, jac = residuals_and_jacobians(target, np.asarray(theta, dtype=np.float64).reshape(1, -1),
+                                     kind)
     return r[0], jac[0]
 
 

@@ -276,15 +276,14 @@ def _pack(t: DataTables, full: bool) -> LeanTables | None:
         rec[node[in_double], N_POS + nf * (2 * pos[in_double] + 1) + q] = v[in_double, None]
     log_f_max = 0.0
     if not full:  # fold wF1 into the exponent: wF1 2^(e1 G1) = 2^(e1 G1 + log2 wF1)
-        f_rec = rec[:, N_POS:N_POS + N_TRI * nf:nf]
+        f_rec = rec[:, N_POS:N_POS + N_TRI * nf:nf]  # views: written in place below
         f_nrec = nrec[:, N_POS:N_POS + 2 * nf:nf]
         if min(f_rec.min(initial=0.0), f_nrec.min(initial=0.0)) < 0:
             return None  # a negative lobe weight has no logarithm: the classic kernel
         with np.errstate(divide="ignore"):  # zero weights (padding, Lambertian): -inf
-            rec[:, N_POS:N_POS + N_TRI * nf:nf] = np.log2(f_rec)
-            nrec[:, N_POS:N_POS + 2 * nf:nf] = np.log2(f_nrec)
-        log_f_max = float(max(rec[:, N_POS:N_POS + N_TRI * nf:nf].max(initial=-np.inf),
-                              nrec[:, N_POS:N_POS + 2 * nf:nf].max(initial=-np.inf)))
+            log_f_max = float(np.log2(max(f_rec.max(initial=0.0), f_nrec.max(initial=0.0))))
+            np.log2(f_rec, out=f_rec)
+            np.log2(f_nrec, out=f_nrec)
     rec, nrec = rec.astype(ft), nrec.astype(ft)
     g_range = np.zeros((2, 2))
     for q in range(nf // 2):  # the G fields: N_POS + nf * triangle + 2 q + 1 in rec and nrec

@@ -144,16 +144,16 @@ def pl_terms(tables: DataTables, coef: np.ndarray, *, full: bool, unary: np.ndar
         out_chunk = np.zeros((n_chunks, npad))
         out_node = np.zeros((1, 1))
     if lean:
-        from mrfpe.targets.lean import lean_tables_t, lean_terms, lean_terms_nodes
+        from mrfpe.targets.lean import lean_tables_t, lean_terms, lean_terms_nodes, node_block
 
         lt = lean_tables(t, full)
         rest = (obs, ft(inv_sigma * LOG2E), chunks, ft(a), ft(b), b != 0, out_chunk, out_node,
                 per_node)
-        with thread_budget(N * t.brdf_evals_per_particle):
+        with thread_budget(N * t.brdf_evals_per_particle) as n_threads:
             if labels_simd:  # the node-major tables: nodes are the SIMD lanes
                 ltt = lean_tables_t(lt)
-                lean_terms_nodes(coef_t, full, ltt.recT, ltt.nrecT,
-                                 _log2_units(unary, transposed=True), *rest)
+                lean_terms_nodes(coef_t, node_block(t.n_nodes, n_threads), full, ltt.recT,
+                                 ltt.nrecT, _log2_units(unary, transposed=True), *rest)
             else:
                 lean_terms(coef_t, bl, full, lt.rec, lt.nrec, _log2_units(unary), *rest)
         return out_node[:, :N].T if per_node else out_chunk[:, :N].sum(axis=0)

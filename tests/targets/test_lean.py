@@ -223,6 +223,37 @@ def test_vector_width_opt_out_and_user_setting():
     assert out == ["late"]  # numba already built its target machine: left alone
 
 
+def test_node_block_is_the_largest_that_keeps_two_blocks_per_thread():
+    from mrfpe.targets.lean import NODE_BLOCK, NODE_BLOCK_MAX, node_block
+
+    assert node_block(10201, 1) == NODE_BLOCK_MAX == 1024  # 100x100: 10 blocks
+    assert node_block(10201, 2) == 1024
+    assert node_block(2601, 2) == 512  # 50x50 on two threads: 6 blocks, not 3
+    assert node_block(900, 1) == 512
+    assert node_block(100, 4) == NODE_BLOCK  # never below the smallest block
+    assert node_block(0, 0) == NODE_BLOCK
+
+
+@pytest.mark.parametrize("brdf,u,surface", [CASES[0], CASES[3]])
+@pytest.mark.parametrize("dtype", ["float64", "float32"])
+def test_nodes_kernel_gives_the_same_bits_for_every_block_size(brdf, u, surface, dtype,
+                                                               monkeypatch):
+    import mrfpe.targets.lean as lean
+
+    s = _scene(brdf, u, surface, shape=(40, 37), n_labels=6)
+    t = get("pls", s, dtype=dtype)
+    assert t._tables.n_nodes > 1024  # blocks of 1024 and of 256 cut it differently
+    x = _points(len(u), n=3)
+    got, asked = {}, []
+    for nb in (256, 512, 1024):
+        monkeypatch.setattr(lean, "node_block", lambda n, k, nb=nb: asked.append(nb) or nb)
+        got[nb] = (t.log_prob(x), t.node_terms(x[:2]))
+    assert asked == [256, 256, 512, 512, 1024, 1024]  # every call took the patched block
+    for nb in (512, 1024):
+        np.testing.assert_array_equal(got[nb][0], got[256][0])
+        np.testing.assert_array_equal(got[nb][1], got[256][1])
+
+
 @pytest.mark.parametrize("brdf,u,surface", [CASES[0], CASES[3]])
 @pytest.mark.parametrize("dtype", ["float64", "float32"])
 def test_small_batches_run_the_nodes_kernel_and_agree_with_large_ones(brdf, u, surface, dtype):

@@ -608,6 +608,9 @@ def lean_terms_nodes(coef, nb, full, recT, nrecT, unaryT, obs, inv_sigma, chunk_
     B = unaryT.shape[0]
     NB = nb
     lo, hi = chunk_ptr[0], chunk_ptr[-1]
+    iso = True  # isotropic lobes (Phong): e2 = 0 for every particle
+    for q in range(N):
+        iso = iso and coef[4, q] == 0
     vals = out_node if per_node else np.empty((hi, N))
     for blk in prange(-(-(hi - lo) // NB)):
         i0 = lo + blk * NB
@@ -648,6 +651,24 @@ def lean_terms_nodes(coef, nb, full, recT, nrecT, unaryT, obs, inv_sigma, chunk_
                     E2 = coef[4, q]
                     qa1, qa2, qb1, qb2 = fa1[q], fa2[q], fb1[q], fb2[q]
                     es = en[q, s]
+                    if iso:  # e2 = 0: E1 G1 + 0 G2 is E1 G1 exactly, and the G2 rows stay unread
+                        for j in range(m):
+                            x0 = fexp2(E1 * g01[j])
+                            x1 = fexp2(E1 * g11[j])
+                            x2 = fexp2(E1 * g21[j])
+                            x3 = fexp2(E1 * g31[j])
+                            x4 = fexp2(E1 * g41[j])
+                            x5 = fexp2(E1 * g51[j])
+                            d = abs(y0[j] - C0 * a0[j] - C1 * (f01[j] * x0 + f11[j] * x1)
+                                    - C2 * (f02[j] * x0 + f12[j] * x1))
+                            d += abs(y1[j] - C0 * a1[j] - C1 * (f21[j] * x2 + f31[j] * x3)
+                                     - C2 * (f22[j] * x2 + f32[j] * x3))
+                            d += abs(y2[j] - C0 * a2[j] - C1 * (qa1[j] + f41[j] * x4)
+                                     - C2 * (qa2[j] + f42[j] * x4))
+                            d += abs(y3[j] - C0 * a3[j] - C1 * (qb1[j] + f51[j] * x5)
+                                     - C2 * (qb2[j] + f52[j] * x5))
+                            es[j] = u[j] + inv_sigma * d
+                        continue
                     for j in range(m):
                         x0 = fexp2(E1 * g01[j] + E2 * g02[j])
                         x1 = fexp2(E1 * g11[j] + E2 * g12[j])

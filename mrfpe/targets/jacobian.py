@@ -56,9 +56,13 @@ def _sgn(t):
 
 
 @njit(parallel=True, fastmath=_FM, error_model="numpy", cache=True)
-def _grad_nodes(coef, full, recT, nrecT, unaryT, obs, inv_sigma, n, a, b,
+def _grad_nodes(coef, full, iso, recT, nrecT, unaryT, obs, inv_sigma, n, a, b,
                 out_val, out_grad):  # pragma: no cover - compiled
     """Node terms ``out_val`` (K, n) and ``dl/dc`` ``out_grad`` (K, n, 5) of K particles.
+
+    ``iso``: the full form with ``e2 = 0`` for every particle and ``G2 = 0`` in every
+    table (isotropic Phong), where the ``G2`` rows are not read and ``dl/de2`` is 0
+    (the same numbers, up to the sign of that zero).
 
     Blocks of ``NODE_BLOCK`` nodes are the SIMD lanes, on the node-major tables
     (:func:`mrfpe.targets.lean.lean_tables_t`), as in
@@ -118,14 +122,24 @@ def _grad_nodes(coef, full, recT, nrecT, unaryT, obs, inv_sigma, n, a, b,
                      f31, g31, f32, g32, f41, g41, f42, g42, f51, g51, f52,
                      g52) = label_rows_full(recT, unaryT, s, sl)
                     es, g0s, g1s, g2s, g3s, g4s = en[s], g[0, s], g[1, s], g[2, s], g[3, s], g[4, s]
-                    for j in range(m):
-                        x0[j] = exp2_64(E1 * g01[j] + E2 * g02[j])
-                        x1[j] = exp2_64(E1 * g11[j] + E2 * g12[j])
-                        x2[j] = exp2_64(E1 * g21[j] + E2 * g22[j])
-                    for j in range(m):
-                        x3[j] = exp2_64(E1 * g31[j] + E2 * g32[j])
-                        x4[j] = exp2_64(E1 * g41[j] + E2 * g42[j])
-                        x5[j] = exp2_64(E1 * g51[j] + E2 * g52[j])
+                    if iso:  # E1 G1 + 0 G2 is E1 G1 exactly: the G2 rows stay unread
+                        for j in range(m):
+                            x0[j] = exp2_64(E1 * g01[j])
+                            x1[j] = exp2_64(E1 * g11[j])
+                            x2[j] = exp2_64(E1 * g21[j])
+                        for j in range(m):
+                            x3[j] = exp2_64(E1 * g31[j])
+                            x4[j] = exp2_64(E1 * g41[j])
+                            x5[j] = exp2_64(E1 * g51[j])
+                    else:
+                        for j in range(m):
+                            x0[j] = exp2_64(E1 * g01[j] + E2 * g02[j])
+                            x1[j] = exp2_64(E1 * g11[j] + E2 * g12[j])
+                            x2[j] = exp2_64(E1 * g21[j] + E2 * g22[j])
+                        for j in range(m):
+                            x3[j] = exp2_64(E1 * g31[j] + E2 * g32[j])
+                            x4[j] = exp2_64(E1 * g41[j] + E2 * g42[j])
+                            x5[j] = exp2_64(E1 * g51[j] + E2 * g52[j])
                     for j in range(m):
                         s10 = f01[j] * x0[j] + f11[j] * x1[j]
                         s20 = f02[j] * x0[j] + f12[j] * x1[j]
@@ -144,6 +158,28 @@ def _grad_nodes(coef, full, recT, nrecT, unaryT, obs, inv_sigma, n, a, b,
                         g0s[j] = isn * (k0 * a0[j] + k1 * a1[j] + k2 * a2[j] + k3 * a3[j])
                         g1s[j] = isn * (k0 * s10 + k1 * s11 + k2 * s12 + k3 * s13)
                         g2s[j] = isn * (k0 * s20 + k1 * s21 + k2 * s22 + k3 * s23)
+                    if iso:  # dE/de1 without the G2 rows; dE/de2 = 0 (below)
+                        for j in range(m):
+                            q0 = (C1 * f01[j] + C2 * f02[j]) * x0[j]
+                            q1 = (C1 * f11[j] + C2 * f12[j]) * x1[j]
+                            q2 = (C1 * f21[j] + C2 * f22[j]) * x2[j]
+                            q3 = (C1 * f31[j] + C2 * f32[j]) * x3[j]
+                            q4 = (C1 * f41[j] + C2 * f42[j]) * x4[j]
+                            q5 = (C1 * f51[j] + C2 * f52[j]) * x5[j]
+                            t0 = (y0[j] - C0 * a0[j] - C1 * (f01[j] * x0[j] + f11[j] * x1[j])
+                                  - C2 * (f02[j] * x0[j] + f12[j] * x1[j]))
+                            t1 = (y1[j] - C0 * a1[j] - C1 * (f21[j] * x2[j] + f31[j] * x3[j])
+                                  - C2 * (f22[j] * x2[j] + f32[j] * x3[j]))
+                            t2 = (y2[j] - C0 * a2[j] - C1 * (ha1[j] + f41[j] * x4[j])
+                                  - C2 * (ha2[j] + f42[j] * x4[j]))
+                            t3 = (y3[j] - C0 * a3[j] - C1 * (hb1[j] + f51[j] * x5[j])
+                                  - C2 * (hb2[j] + f52[j] * x5[j]))
+                            k0, k1, k2, k3 = _sgn(t0), _sgn(t1), _sgn(t2), _sgn(t3)
+                            g3s[j] = isn * (k0 * (q0 * g01[j] + q1 * g11[j])
+                                            + k1 * (q2 * g21[j] + q3 * g31[j])
+                                            + k2 * (wa1[j] + q4 * g41[j])
+                                            + k3 * (wb1[j] + q5 * g51[j]))
+                        continue
                     for j in range(m):
                         q0 = (C1 * f01[j] + C2 * f02[j]) * x0[j]
                         q1 = (C1 * f11[j] + C2 * f12[j]) * x1[j]
@@ -216,7 +252,7 @@ def _grad_nodes(coef, full, recT, nrecT, unaryT, obs, inv_sigma, n, a, b,
             for j in range(m):
                 out_val[q, i0 + j] = _LN2 * (af * -eo[j] - bf * mn[j]) + bf * np.log(tot[j])
             for k in range(5):
-                if not full and (k == 2 or k == 4):
+                if (not full and k == 2) or ((not full or iso) and k == 4):
                     for j in range(m):
                         out_grad[q, i0 + j, k] = 0.0
                     continue
@@ -291,7 +327,8 @@ def node_terms_and_jacobians(target: Any, thetas: np.ndarray) -> tuple[np.ndarra
     if n:
         with thread_budget(t.brdf_evals_per_particle * k):  # as k residual rows
             ltt = lean_tables_t(lt)
-            _grad_nodes(ck, full, ltt.recT, ltt.nrecT,
+            iso = full and not np.any(lt.g_range[1]) and not np.any(ck[4])  # isotropic Phong
+            _grad_nodes(ck, full, iso, ltt.recT, ltt.nrecT,
                         _log2_units(target._unary_e, transposed=True), target._obs,
                         LOG2E / target.sigma_b, n, float(target._a), float(target._b),
                         val, grad)

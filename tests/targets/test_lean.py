@@ -254,6 +254,27 @@ def test_nodes_kernel_gives_the_same_bits_for_every_block_size(brdf, u, surface,
         np.testing.assert_array_equal(got[nb][1], got[256][1])
 
 
+@pytest.mark.parametrize("dtype", ["float64", "float32"])
+def test_nodes_kernel_isotropic_path_gives_the_same_bits_as_the_general_one(dtype):
+    from mrfpe.targets import reflectance
+    from mrfpe.targets.dispatch import pl_terms
+
+    brdf, u, surface = CASES[3]  # anisotropic Phong: its tables have G2 rows
+    t = get("pls", _scene(brdf, u, surface, shape=(20, 23)), dtype=dtype)
+    coef = reflectance.coefficients(t.model, t.model.to_natural(np.array([u, u])))
+    coef[0, 4] = 0.0  # row 0 alone: e2 = 0, the path that leaves the G2 rows unread
+
+    def terms(c):
+        return pl_terms(t._tables, c, full=True, unary=t._unary_e, obs=t._obs,
+                        inv_sigma=1.0 / t.sigma_b, chunks=t._chunks, a=t._a, b=t._b,
+                        dtype=dtype, per_node=True)
+
+    alone = terms(coef[:1])
+    both = terms(coef)  # row 1 has e2 != 0: the whole batch takes the general path
+    np.testing.assert_array_equal(both[0], alone[0])
+    assert not np.allclose(both[1], both[0])  # the G2 rows matter there
+
+
 @pytest.mark.parametrize("brdf,u,surface", [CASES[0], CASES[3]])
 @pytest.mark.parametrize("dtype", ["float64", "float32"])
 def test_small_batches_run_the_nodes_kernel_and_agree_with_large_ones(brdf, u, surface, dtype):

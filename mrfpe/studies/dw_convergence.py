@@ -12,19 +12,21 @@ What we add: the same curve for the distance to the target's global
 maximiser. Both samplers run on the same scene in one trial; the trace is kept
 at steps 1-10 and then every ``record_stride`` steps.
 
-Full run: about 10 h on two cores (one process per core), in float32 (the
+Full run: about 14 h on two cores (one process per core), in float32 (the
 default, as in ``pmc_convergence``: ``log_prob`` within 2e-6 relative, a few
 1e-2 nats at these lattices' values, far below the acceptance ratios' scale).
 That is 800 scenes (2 models × 4 label counts × 100) × 2 samplers × 20000
 single-point evaluations at 100×100 pixels plus a maximiser per scene; measured
 on a 2-core AMD EPYC (Zen 4, Dec 2026) with the nodes-as-SIMD small-batch
-kernel: 1.2-1.4 ms per step at 20 Ward labels on one core (0.86 ms of it the
-evaluation; two points in one call cost 1.5 ms, so running the two chains side by
-side would save little), 68 s per
-20-label Ward scene (median of the 100 committed, each run beside another study on
-the other core); time grows about linearly with the labels, Phong's scenes cost
-about 1.3× Ward's: about 21 core-hours. ``--trials 10`` gives usable curves in
-about an hour.
+kernel, one scene per core beside another study on the other core (medians of
+the committed trials): 31 s per 10-label Ward scene, 68 s per 20-label one;
+Phong's cost 2.5× Ward's (76 s at 10 labels) before the kernel left isotropic
+Phong's unused second-exponent rows unread (0.66× the time per evaluation; same
+numbers). One evaluation reads the whole table (13 MB for Ward at 20 labels), so
+a step is bound by memory; running the two samplers in lockstep threads, their
+points in one call, was slower (``docs/design-changes.md``). Time grows about
+linearly with the labels: about 27 core-hours in all. ``--trials 10`` gives usable
+curves in about an hour and a half.
 """
 
 from __future__ import annotations

@@ -651,7 +651,9 @@ def lean_terms_nodes(coef, nb, full, recT, nrecT, unaryT, obs, inv_sigma, chunk_
                     E2 = coef[4, q]
                     qa1, qa2, qb1, qb2 = fa1[q], fa2[q], fb1[q], fb2[q]
                     es = en[q, s]
-                    if iso:  # e2 = 0: E1 G1 + 0 G2 is E1 G1 exactly, and the G2 rows stay unread
+                    # e2 = 0: E1 G1 + 0 G2 is E1 G1 exactly, and the G2 rows stay unread. A loop
+                    # of its own: one loop with the branch inside changed LLVM's FMAs (the bits)
+                    if iso:
                         for j in range(m):
                             x0 = fexp2(E1 * g01[j])
                             x1 = fexp2(E1 * g11[j])

@@ -70,9 +70,9 @@ from mrfpe.targets.kernels import (
 from mrfpe.threads import compiled_features
 
 __all__ = ["BLOCK_BYTES", "BLOCK_MAX", "HI32", "HI64", "LOG2E", "NODE_BLOCK", "NODE_BLOCK_MAX",
-           "SCALEF",
-           "LeanTables", "LeanTablesT", "block_size", "exp2_32", "exp2_64", "exponent_bound",
-           "fexp2", "lean_tables", "lean_tables_t", "lean_terms", "lean_terms_nodes", "node_block"]
+           "SCALEF", "LeanTables", "LeanTablesT", "block_size", "exp2_32", "exp2_64",
+           "exponent_bound", "fexp2", "lean_tables", "lean_tables_t", "lean_terms",
+           "lean_terms_nodes", "node_block"]
 
 LOG2E = 1.4426950408889634
 _LN2 = 0.6931471805599453

@@ -152,8 +152,8 @@ def pl_terms(tables: DataTables, coef: np.ndarray, *, full: bool, unary: np.ndar
         with thread_budget(N * t.brdf_evals_per_particle) as n_threads:
             if labels_simd:  # the node-major tables: nodes are the SIMD lanes
                 ltt = lean_tables_t(lt)
-                lean_terms_nodes(coef_t, node_block(t.n_nodes, n_threads), full, ltt.recT,
-                                 ltt.nrecT, _log2_units(unary, transposed=True), *rest)
+                lean_terms_nodes(coef_t, node_block(t.n_nodes, n_threads), full, lt.isotropic,
+                                 ltt.recT, ltt.nrecT, _log2_units(unary, transposed=True), *rest)
             else:
                 lean_terms(coef_t, bl, full, lt.rec, lt.nrec, _log2_units(unary), *rest)
         return out_node[:, :N].T if per_node else out_chunk[:, :N].sum(axis=0)

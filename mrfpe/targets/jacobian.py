@@ -60,9 +60,9 @@ def _grad_nodes(coef, full, iso, recT, nrecT, unaryT, obs, inv_sigma, n, a, b,
                 out_val, out_grad):  # pragma: no cover - compiled
     """Node terms ``out_val`` (K, n) and ``dl/dc`` ``out_grad`` (K, n, 5) of K particles.
 
-    ``iso``: the full form with ``G2 = 0`` in every table (isotropic Phong), where
-    ``E1 G1 + E2 G2`` is ``E1 G1`` exactly and ``dl/de2`` is 0 whatever ``e2``: the ``G2``
-    rows are not read (the same numbers, up to the sign of that zero).
+    ``iso``: :attr:`~mrfpe.targets.lean.LeanTables.isotropic` (every ``G2 = 0``), where
+    ``dl/de2`` is 0 whatever ``e2`` and the ``G2`` rows are not read (the same numbers, up
+    to the sign of that zero).
 
     Blocks of ``NODE_BLOCK`` nodes are the SIMD lanes, on the node-major tables
     (:func:`mrfpe.targets.lean.lean_tables_t`), as in
@@ -327,8 +327,7 @@ def node_terms_and_jacobians(target: Any, thetas: np.ndarray) -> tuple[np.ndarra
     if n:
         with thread_budget(t.brdf_evals_per_particle * k):  # as k residual rows
             ltt = lean_tables_t(lt)
-            iso = full and not np.any(lt.g_range[1])  # G2 = 0 everywhere: isotropic Phong
-            _grad_nodes(ck, full, iso, ltt.recT, ltt.nrecT,
+            _grad_nodes(ck, full, lt.isotropic, ltt.recT, ltt.nrecT,
                         _log2_units(target._unary_e, transposed=True), target._obs,
                         LOG2E / target.sigma_b, n, float(target._a), float(target._b),
                         val, grad)

@@ -223,6 +223,12 @@ class LeanTables:
     def nbytes(self) -> int:
         return int(self.rec.nbytes + self.nrec.nbytes)
 
+    @property
+    def isotropic(self) -> bool:
+        """The full form with every ``G2 = 0`` (isotropic Phong): ``E1 G1 + E2 G2`` is
+        ``E1 G1`` exactly, so the kernels leave the ``G2`` rows unread."""
+        return bool(self.full and not np.any(self.g_range[1]))
+
 
 def _pack(t: DataTables, full: bool) -> LeanTables | None:
     """Template tables of ``t``, or None if a node's slots do not fit the template."""
@@ -581,10 +587,11 @@ def label_rows_ward(recT, unaryT, s, sl):  # pragma: no cover - compiled
 
 
 @njit(parallel=True, fastmath=_FM, error_model="numpy", cache=True)
-def lean_terms_nodes(coef, nb, full, recT, nrecT, unaryT, obs, inv_sigma, chunk_ptr, a, b,
-                     do_lse, out_chunk, out_node, per_node):  # pragma: no cover - compiled
+def lean_terms_nodes(coef, nb, full, iso, recT, nrecT, unaryT, obs, inv_sigma, chunk_ptr, a,
+                     b, do_lse, out_chunk, out_node, per_node):  # pragma: no cover - compiled
     """As :func:`lean_terms` for a few particles, with blocks of ``nb`` nodes
-    (:func:`node_block`) as the SIMD lanes, whatever the label count.
+    (:func:`node_block`) as the SIMD lanes, whatever the label count; ``iso``:
+    :attr:`LeanTables.isotropic`.
 
     ``coef`` is (5, N) without padding; ``recT``, ``nrecT``: :class:`LeanTablesT`;
     ``unaryT``: (B, n) in log2 units. Same formula and order of operations per
@@ -608,9 +615,6 @@ def lean_terms_nodes(coef, nb, full, recT, nrecT, unaryT, obs, inv_sigma, chunk_
     B = unaryT.shape[0]
     NB = nb
     lo, hi = chunk_ptr[0], chunk_ptr[-1]
-    iso = True  # isotropic lobes (Phong): e2 = 0 for every particle
-    for q in range(N):
-        iso = iso and coef[4, q] == 0
     vals = out_node if per_node else np.empty((hi, N))
     for blk in prange(-(-(hi - lo) // NB)):
         i0 = lo + blk * NB
@@ -651,7 +655,7 @@ def lean_terms_nodes(coef, nb, full, recT, nrecT, unaryT, obs, inv_sigma, chunk_
                     E2 = coef[4, q]
                     qa1, qa2, qb1, qb2 = fa1[q], fa2[q], fb1[q], fb2[q]
                     es = en[q, s]
-                    # e2 = 0: E1 G1 + 0 G2 is E1 G1 exactly, and the G2 rows stay unread. A loop
+                    # G2 = 0: E1 G1 + E2 0 is E1 G1 exactly, and the G2 rows stay unread. A loop
                     # of its own: one loop with the branch inside changed LLVM's FMAs (the bits)
                     if iso:
                         for j in range(m):

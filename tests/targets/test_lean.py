@@ -255,24 +255,28 @@ def test_nodes_kernel_gives_the_same_bits_for_every_block_size(brdf, u, surface,
 
 
 @pytest.mark.parametrize("dtype", ["float64", "float32"])
-def test_nodes_kernel_isotropic_path_gives_the_same_bits_as_the_general_one(dtype):
-    from mrfpe.targets import reflectance
-    from mrfpe.targets.dispatch import pl_terms
+def test_nodes_kernel_isotropic_path_gives_the_same_bits_as_the_general_one(dtype, monkeypatch):
+    import mrfpe.targets.lean as lean
 
-    brdf, u, surface = CASES[3]  # anisotropic Phong: its tables have G2 rows
+    brdf, u, surface = CASES[1]  # isotropic Phong: every G2 = 0
     t = get("pls", _scene(brdf, u, surface, shape=(20, 23)), dtype=dtype)
-    coef = reflectance.coefficients(t.model, t.model.to_natural(np.array([u, u])))
-    coef[0, 4] = 0.0  # row 0 alone: e2 = 0, the path that leaves the G2 rows unread
+    assert lean.lean_tables(t._tables, True).isotropic
+    aniso = get("pls", _scene(*CASES[3], shape=(20, 23)), dtype=dtype)
+    assert not lean.lean_tables(aniso._tables, True).isotropic
 
-    def terms(c):
-        return pl_terms(t._tables, c, full=True, unary=t._unary_e, obs=t._obs,
-                        inv_sigma=1.0 / t.sigma_b, chunks=t._chunks, a=t._a, b=t._b,
-                        dtype=dtype, per_node=True)
+    x = _points(len(u), n=2)
+    iso = [(t.log_prob(x[:k]), t.node_terms(x[:k])) for k in (1, 2)]
+    kernel, taken = lean.lean_terms_nodes, []
 
-    alone = terms(coef[:1])
-    both = terms(coef)  # row 1 has e2 != 0: the whole batch takes the general path
-    np.testing.assert_array_equal(both[0], alone[0])
-    assert not np.allclose(both[1], both[0])  # the G2 rows matter there
+    def general(coef, nb, full, iso, *rest):  # the same call down the general path
+        taken.append(iso)
+        return kernel(coef, nb, full, False, *rest)
+
+    monkeypatch.setattr(lean, "lean_terms_nodes", general)
+    for k, (lp, nt) in zip((1, 2), iso):
+        np.testing.assert_array_equal(t.log_prob(x[:k]), lp)
+        np.testing.assert_array_equal(t.node_terms(x[:k]), nt)
+    assert taken == [True] * 4  # every call would have taken the isotropic path
 
 
 @pytest.mark.parametrize("brdf,u,surface", [CASES[0], CASES[3]])

@@ -62,6 +62,9 @@ def check_lm_multiseed(results, cfg):
         assert ds["best_to_truth"].sel(ranking="lm_cost", subset_size=cfg["n_seeds"]) == \
             pytest.approx(d)
         triangle(ds, "best_to_truth", "best_to_maximiser")
+        # every seed's MINPACK outcome: a scipy status, and at least its first evaluation
+        assert set(np.unique(ds["status"].values)) <= {0, 1, 2, 3, 4}
+        assert np.all(ds["n_evals"].values >= 1)
 
 
 def check_dw_convergence(results, cfg):

@@ -10,6 +10,7 @@ at their thesis settings, on the ``pmc_convergence`` Ward scenes of
 Usage::
 
     NUMBA_NUM_THREADS=1 nice -n 10 python docs/results/pmc_thesis2_readings/others.py 0-2
+    python docs/results/pmc_thesis2_readings/others.py summary   # the markdown table
 """
 
 from __future__ import annotations
@@ -93,5 +94,44 @@ def main(argv: list[str]) -> None:
                   f"({row['wall_s']:.0f}s)", flush=True)
 
 
+def _ms(x: np.ndarray) -> str:
+    return f"{np.mean(x):.3f} ± {np.std(x, ddof=1) if x.size > 1 else 0:.3f}"
+
+
+def summary() -> str:
+    """One markdown row per sampler of ``others.jsonl``: mean ± sd over its scenes.
+
+    MAP distance (best-so-far, to the truth) at the first iteration/step, a quarter
+    of the way (iteration 6 of 20, step 5000 of 20000) and the end; how many scenes end
+    within 0.15; the final MAP's log-PL minus the truth's (median and range, nats: ≥ 0
+    where the sampler found the PL's peak region, which lies off the truth; not for the
+    per-node rows, whose target is rescaled); the ESS and
+    the acceptance where the sampler has them; the median wall time.
+    """
+    rows = [json.loads(line) for line in OUT.read_text().splitlines()]
+    order = list(dict.fromkeys(r["sampler"] for r in rows))
+    out = ["| sampler | scenes | first | ¼ | end | end ≤ 0.15 | MAP log-PL − truth's "
+           "| ESS first → last (median) | acceptance | wall (median) |", "|" + "---|" * 10]
+    for name in order:
+        rs = sorted((r for r in rows if r["sampler"] == name), key=lambda r: r["scene"])
+        d = np.array([r["map_dist"] for r in rs])
+        q = d.shape[1] // 4
+        gap = np.array([r["final_map_lt"] - r["truth_lt"] for r in rs])
+        reach = ("—" if name.endswith("_per_node") else
+                 f"{np.median(gap):+.1f} [{gap.min():+.0f}, {gap.max():+.0f}]")
+        ess = [r["ess"] for r in rs if r.get("ess")]
+        ess_s = (f"{np.median([e[0] for e in ess]):.1f} → {np.median([e[-1] for e in ess]):.1f}"
+                 if ess else "—")
+        acc = [r["acceptance_mean"] for r in rs if "acceptance_mean" in r]
+        acc_s = f"{np.mean(acc):.3f} [{min(acc):.3f}–{max(acc):.3f}]" if acc else "—"
+        out.append(f"| {name} | {len(rs)} | {_ms(d[:, 0])} | {_ms(d[:, q])} | {_ms(d[:, -1])} | "
+                   f"{int(np.sum(d[:, -1] <= 0.15))}/{len(rs)} | {reach} | {ess_s} | {acc_s} | "
+                   f"{np.median([r['wall_s'] for r in rs]):.0f} s |")
+    return "\n".join(out)
+
+
 if __name__ == "__main__":
-    main(sys.argv[1:])
+    if sys.argv[1:2] == ["summary"]:
+        print(summary())
+    else:
+        main(sys.argv[1:])

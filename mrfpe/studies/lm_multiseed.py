@@ -29,10 +29,11 @@ residual evaluations, whichever comes first; the ten-iteration reading's results
 lmder counts only the residual calls, so it allowed up to ~35 iterations.)
 The default budget binds far more often for Phong. On one scene per model, 64 seeds
 each, 2 of 64 Ward seeds (20 labels) and 33 of 64 Phong seeds (10 labels) stopped at it
-(``status`` 0), among them the 11 Phong seeds with the lowest LM error, still creeping
-along the curved valley of the error 7.10, 0.08-0.15 from the truth; Ward's best seeds
-had converged. Trials record each seed's ``status`` and ``n_evals`` from 2 Dec 2026 on,
-and the report gives the share per cell.
+(``status`` 0), among them 7 of the 8 Phong seeds with the lowest LM error, stalled in
+the curved, kinked valley of the error 7.10, 0.08-0.15 from the truth (ten times the
+budget moved them by a median 0.003); Ward's best seeds had converged
+(``docs/results/lm_multiseed/readings/budget_probe.py``). Trials record each seed's
+``status`` and ``n_evals`` from 2 Dec 2026 on, and the report gives the share per cell.
 
 Full run: 160 scenes (2 models × 4 label counts × 20) × 512 seeds run to
 convergence (50-120 thousand residual-and-Jacobian passes per scene) at 100×100

@@ -31,9 +31,13 @@ OUT = HERE / "others.jsonl"
 SAMPLERS = {
     "pmc_thesis1": ("pmc", {"n_samples": 1000, "n_iterations": 20, "variant": "thesis1",
                             "keep_history": True}),
+    # the thesis's weights, pinned: the library's defaults became "mixture" after the first
+    # three scenes were run (those rows were made with "thesis", then the default)
     "sir_alternative": ("sir", {"n_samples": 1000, "n_iterations": 20,
-                                "variant": "alternative", "keep_history": True}),
-    "ppf": ("ppf", {"n_samples": 1000, "n_partitions": 20, "k": 3, "keep_history": True}),
+                                "variant": "alternative", "weights": "thesis",
+                                "keep_history": True}),
+    "ppf": ("ppf", {"n_samples": 1000, "n_partitions": 20, "k": 3, "weights": "thesis",
+                    "keep_history": True}),
     "dw_r_absolute": ("dw_r", {"n_steps": 20000, "initial_weight": "absolute"}),
     "dw_q_absolute": ("dw_q", {"n_steps": 20000, "initial_weight": "absolute"}),
     "dw_r_relative": ("dw_r", {"n_steps": 20000, "initial_weight": "relative"}),

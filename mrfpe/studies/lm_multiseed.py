@@ -139,8 +139,8 @@ def mean_over_scenes(group: list[xr.Dataset]) -> xr.Dataset:
 
 
 def budget_share(group: list[xr.Dataset]) -> str:
-    """Seeds that stopped at the evaluation budget (MINPACK status 0), over the scenes that
-    record it: ``"12.5 % (5 scenes)"``, or ``"—"`` if none does."""
+    """Seeds that stopped at their LM budget (status 0: ``max_nfev`` or ``max_iterations``),
+    over the scenes that record it: ``"12.5 % (5 scenes)"``, or ``"—"`` if none does."""
     known = [ds["status"].values for ds in group if "status" in ds]
     if not known:
         return "—"
@@ -215,8 +215,9 @@ def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
     write_report(out_dir, "Multiple-seed Levenberg-Marquardt (thesis Figs. 7.3-7.6)", [
         f"Config: `{json.dumps(config)}`.", legend, table,
         "Time per scene (all seeds). *Seeds at the budget*: the share of seeds whose LM "
-        "stopped at scipy's default budget of 100·d residual evaluations (MINPACK status 0) "
-        "rather than at convergence, over the scenes that record it:\n\n" + times,
+        "stopped at its budget (status 0: `max_nfev`, scipy's default 100·d residual "
+        "evaluations, or `max_iterations`) rather than at convergence, over the scenes that "
+        "record it:\n\n" + times,
         *(f"![{f}]({f})" for f in figs)])
     return table
 

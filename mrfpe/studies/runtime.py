@@ -15,8 +15,8 @@ maximiser.
 Timings are only meaningful when nothing else competes for the cores: run
 this study in-process (no ``--scheduler``) on an otherwise idle machine.
 
-Full run: about 3 h on two cores, estimated from its parts (Dec 2026 kernels;
-not yet run at full size). That is 12 scenes (4 label counts × 3) × all ten
+Full run: about 1.9 h on two cores, one trial per core (measured 2026-12-02;
+3.6 core-hours). That is 12 scenes (4 label counts × 3) × all ten
 runs; per 20-label Ward scene most of the time goes to the single-point
 samplers: ``nlopt_multiseed`` (512 seeds × up to 500 evaluations at ~0.65 ms),
 the two 20000-step chains (~15 s each) and 512-seed LM run to convergence

@@ -115,8 +115,14 @@ def trial(config: dict, repeat: int, seed: int) -> xr.Dataset:
     return ds
 
 
+def _unit(seconds: float) -> tuple[float, str]:
+    """Seconds below two minutes, minutes above."""
+    return (1.0, "s") if seconds < 120 else (60.0, "min")
+
+
 def _minutes(seconds: float) -> str:
-    return f"{seconds:.3g} s" if seconds < 120 else f"{seconds / 60:.3g} min"
+    scale, unit = _unit(seconds)
+    return f"{seconds / scale:.3g} {unit}"
 
 
 def _with_range(values: np.ndarray) -> str:
@@ -124,9 +130,13 @@ def _with_range(values: np.ndarray) -> str:
     mean = float(np.mean(values))
     if values.size < 2:
         return _minutes(mean)
-    scale, unit = (1.0, "s") if mean < 120 else (60.0, "min")
-    return (f"{mean / scale:.3g} {unit} ({values.min() / scale:.3g}–"
-            f"{values.max() / scale:.3g})")
+    scale, _ = _unit(mean)
+    return f"{_minutes(mean)} ({values.min() / scale:.3g}–{values.max() / scale:.3g})"
+
+
+def _thesis_minutes(run: str, labels: int) -> float | None:
+    """Table 8.12's time for the thesis column this run compares with, or None."""
+    return RUNTIME_MINUTES.get(THESIS_COLUMN.get(run, ""), {}).get(labels)
 
 
 #: Table 8.12's argument: LM costs about 20× PMC. Our ratio per scene, for these pairs.
@@ -143,8 +153,7 @@ def ratio_table(cells: dict[tuple, list[xr.Dataset]], runs: list[str],
         for (lab,), group in cells.items():
             r = np.array([float(g["wall_time_s"].sel(run=num) / g["wall_time_s"].sel(run=den))
                           for g in group])
-            ref_num = RUNTIME_MINUTES.get(THESIS_COLUMN.get(num, ""), {}).get(lab)
-            ref_den = RUNTIME_MINUTES.get(THESIS_COLUMN.get(den, ""), {}).get(lab)
+            ref_num, ref_den = _thesis_minutes(num, lab), _thesis_minutes(den, lab)
             ref = (f"{ref_num / ref_den:.3g}×" if thesis_size and ref_num and ref_den
                    else "–")
             spread = f" ({r.min():.3g}–{r.max():.3g})" if r.size > 1 else ""
@@ -165,10 +174,9 @@ def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
     for run in runs:
         for lab in labels_list:
             m = means[lab].sel(run=run)
-            ref = RUNTIME_MINUTES.get(THESIS_COLUMN.get(run, ""), {}).get(lab)
-            ref = ref if thesis_size else None
-            wall = float(m["wall_time_s"])
+            ref = _thesis_minutes(run, lab) if thesis_size else None
             walls = np.array([float(g["wall_time_s"].sel(run=run)) for g in cells[(lab,)]])
+            wall = float(walls.mean())
             reached = sum(bool(np.isfinite(g["evals_to_truth"].sel(run=run)))
                           for g in cells[(lab,)])
             rows.append([run, lab, _with_range(walls), "–" if ref is None else f"{ref:g} min",

@@ -267,6 +267,10 @@ def thesis1_step(cfg: Any, ctx: Context, state: PMCState, n: int,
 
 
 
+#: Initial sets: the grid of cell centres, the grid from face to face (both "evenly
+#: spaced", 6.6), a scrambled Halton design.
+INITIAL_SETS = ("grid", "grid_faces", "halton")
+
 STEPS: dict[str, Step] = {"mixture": mixture_step, "thesis2": thesis2_step,
                           "thesis2_literal": thesis2_literal_step, "thesis1": thesis1_step}
 
@@ -281,7 +285,8 @@ class PMC(Sampler):
     initial jitter decreasing linearly to 0, ``kernel`` shape, ``resampling``
     scheme (see :mod:`mrfpe.resampling`),
     ``ess_threshold`` (mixture only: resample only when ESS < threshold·N),
-    ``initial`` set (``"grid"`` or ``"halton"``) and
+    ``initial`` set (``"grid"``: cell centres; ``"grid_faces"``: evenly spaced from
+    face to face, :func:`~mrfpe.samplers.kit.grid`; ``"halton"``) and
     ``keep_history`` (store every iteration's weighted set).
 
     ``power``, ``kernel`` and ``resampling`` = None take the variant's
@@ -332,7 +337,7 @@ class PMC(Sampler):
                              f"variants use the spherical σ_n); got variant={variant!r}")
         if initial is None:
             initial = "halton" if variant == "mixture" else "grid"
-        self.initial = check_choice("initial", initial, ("grid", "halton"))
+        self.initial = check_choice("initial", initial, INITIAL_SETS)
         if resampling is None:
             resampling = "systematic" if variant == "mixture" else "multinomial"
         self.resampling = check_choice("resampling", resampling, RESAMPLING_METHODS)
@@ -406,8 +411,8 @@ class PMC(Sampler):
         run = Run(target, T, progress=progress, callback=callback, desc=f"pmc/{self.variant}")
         ctx = Context(run, np.random.default_rng(seed), bounds)
         step, history = STEPS[self.variant], History(self.keep_history)
-        start = (grid(bounds, self.n_samples) if self.initial == "grid"
-                 else space_filling(bounds, self.n_samples, ctx.rng))
+        start = (space_filling(bounds, self.n_samples, ctx.rng) if self.initial == "halton"
+                 else grid(bounds, self.n_samples, faces=self.initial == "grid_faces"))
         state = init_state(start, self.power)
         for n in range(T):
             state, lg = step(self, ctx, state, n, G[n % len(G)])

@@ -57,6 +57,34 @@ def test_grid_is_evenly_spaced():
     assert np.all((g2 >= [0, 1]) & (g2 <= [2, 3]))
 
 
+def test_grid_from_face_to_face():
+    b = np.array([[0.0, 1.0], [-1.0, 1.0], [2.0, 5.0]])
+    g = grid(b, 64, faces=True)  # the 4³ grid {0, ⅓, ⅔, 1}³ scaled to the box
+    for j, (lo, hi) in enumerate(b):
+        assert np.allclose(np.unique(g[:, j]), np.linspace(lo, hi, 4))
+    on_face = np.any(np.isclose(g, b[:, 0]) | np.isclose(g, b[:, 1]), axis=1)
+    assert on_face.sum() == 64 - 8  # only the 2³ inner points are off the faces
+    assert np.allclose(grid(b, 1, faces=True), b.mean(axis=1))  # m = 1: the centre
+    g5 = grid(b[:2], 5, faces=True)  # not a perfect square: a spread subset of the 3²
+    assert g5.shape == (5, 2) and len(np.unique(g5, axis=0)) == 5
+
+
+@pytest.mark.parametrize("initial,faces", [("grid", False), ("grid_faces", True)])
+def test_thesis_variants_start_from_the_chosen_grid(initial, faces):
+    seen = []
+
+    class Recorder(CorrelatedGaussian):
+        def log_prob(self, theta):
+            seen.append(np.atleast_2d(theta).copy())
+            return super().log_prob(theta)
+
+    t = Recorder()
+    PMC(n_samples=27, n_iterations=2, variant="thesis2", k=1, initial=initial).run(t, seed=0)
+    assert np.array_equal(seen[0], grid(t.bounds, 27, faces=faces))  # G^0 weighs the start
+    with pytest.raises(ValueError, match="initial"):
+        PMC(initial="faces")
+
+
 class Spy(CorrelatedGaussian):
     """Records which sub-target evaluates how many rows."""
 

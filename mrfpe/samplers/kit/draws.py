@@ -10,18 +10,28 @@ import numpy as np
 __all__ = ["draw_in_support", "grid", "space_filling"]
 
 
-def grid(bounds: np.ndarray, n: int) -> np.ndarray:
+def grid(bounds: np.ndarray, n: int, *, faces: bool = False) -> np.ndarray:
     """``n`` evenly spaced points in the box (the thesis's initial set, 6.6.1–6.6.2).
 
-    The box is cut into ``m = ceil(n^(1/d))`` cells per axis and the cell
-    centres are used (1000 = 10³ in 3-D gives the thesis's 10×10×10 grid); when
-    ``n`` is not a perfect power, ``n`` of the ``m^d`` centres are taken at
-    evenly spaced positions of the lexicographic order.
+    The box is cut into ``m = ceil(n^(1/d))`` points per axis (1000 = 10³ in 3-D
+    gives the thesis's 10×10×10 grid), and when ``n`` is not a perfect power,
+    ``n`` of the ``m^d`` points are taken at evenly spaced positions of the
+    lexicographic order. "Evenly spaced" has two readings, and they differ most
+    at small ``n``:
+
+    * ``faces=False``: the cell centres ``lo + (i + ½)/m · (hi − lo)``, which
+      never touch the box's faces (the 4³ grid is {⅛, ⅜, ⅝, ⅞}³);
+    * ``faces=True``: ``m`` points from face to face, ``lo + i/(m − 1) · (hi − lo)``
+      (``numpy.linspace``; the 4³ grid is {0, ⅓, ⅔, 1}³, 56 of its 64 points on
+      the faces), the reading under which PMC (II) reproduces Table 7.1's
+      N = 125 and 64 columns (``docs/results/pmc_convergence_faces/``). With
+      ``m = 1`` the single point is the centre either way.
     """
     b = np.asarray(bounds, dtype=np.float64)
     d = b.shape[0]
     m = max(1, math.ceil(round(n ** (1.0 / d), 9)))
-    axes = [b[j, 0] + (np.arange(m) + 0.5) / m * (b[j, 1] - b[j, 0]) for j in range(d)]
+    unit = (np.linspace(0.0, 1.0, m) if faces and m > 1 else (np.arange(m) + 0.5) / m)
+    axes = [b[j, 0] + unit * (b[j, 1] - b[j, 0]) for j in range(d)]
     pts = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, d)
     if pts.shape[0] == n:
         return pts

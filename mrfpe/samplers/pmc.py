@@ -3,8 +3,8 @@
 Importance functions ``G^n`` (7.9): when the target offers ``partition(k, kind)``
 they are its ``k`` sub-lattice targets (5.67 blocks / 5.68 strided subsets),
 softened with power ``l`` (5.69–5.72) and cycled ``n mod k``; otherwise the
-softened full target. Iteration 0 weights a starting set (the thesis's evenly
-spaced grid, or by default for ``"mixture"`` a scrambled Halton design); every
+softened full target. Iteration 0 weights a starting set (for the thesis variants the evenly
+spaced grid from face to face, for ``"mixture"`` a scrambled Halton design); every
 resampling adds Gaussian jitter (the thesis's ``σ_n = σ₀ (1 − n/T)``, σ₀ = 0.07,
 6.6), and after the last iteration the set is reweighted with the full target.
 
@@ -24,7 +24,7 @@ Variants
     extensions beyond the thesis, measured in ``benchmarks/bench_accuracy.py``
     and ``benchmarks/bench_pmc.py``. ``kernel="adaptive"`` (diagonal
     ``min(σ_n, h·sd_j)``, the default until issue 12: too narrow once σ_n → 0,
-    weighted sd 0.67–0.77 of the truth) and ``initial="grid"`` are kept;
+    weighted sd 0.67–0.77 of the truth) and ``initial="grid"`` (cell centres) are kept;
     ``power=<float>, kernel="isotropic"`` is the thesis's fixed softening and
     spherical ``σ_n``.
 ``"thesis2"`` (PMC (II), 6.6.2, read as compounding): resample with
@@ -296,7 +296,10 @@ class PMC(Sampler):
     resampling (less drift, so a second mode survives to the final reweighting);
     for the thesis variants a fixed power (:data:`THESIS2_POWER` for "thesis2",
     :data:`THESIS_POWER` for the others), the spherical ``σ_n``,
-    the grid and multinomial resampling exactly as 6.6. The thesis gives no softening
+    the evenly spaced grid from face to face (``"grid_faces"``: the reading of "evenly
+    spaced" under which PMC (II) reproduces Table 7.1's N = 125 and 64 columns, where the
+    cell centres do not; ``docs/results/pmc_convergence_faces/``) and multinomial
+    resampling exactly as 6.6. The thesis gives no softening
     power, and on a 100x100 PL the spherical kernel cannot follow a target
     that is ~100x sharper in one parameter than along a ridge in the others:
     ``benchmarks/bench_pmc.py`` measures the choice.
@@ -336,7 +339,7 @@ class PMC(Sampler):
             raise ValueError(f"kernel={kernel!r} applies to variant='mixture' only (the thesis "
                              f"variants use the spherical σ_n); got variant={variant!r}")
         if initial is None:
-            initial = "halton" if variant == "mixture" else "grid"
+            initial = "halton" if variant == "mixture" else "grid_faces"
         self.initial = check_choice("initial", initial, INITIAL_SETS)
         if resampling is None:
             resampling = "systematic" if variant == "mixture" else "multinomial"

@@ -91,7 +91,8 @@ def trial(config: dict, repeat: int, seed: int) -> xr.Dataset:
         for j, n in enumerate(sizes):
             post, evals = sample_traced("pmc", prob.target, run_seeds[i * len(sizes) + j],
                                         n_samples=n, n_iterations=T, variant=variant,
-                                        keep_history=True, **config["pmc_options"])
+                                        keep_history=True,
+                                        **variant_options(config["pmc_options"], variant))
             m = post["map_theta"].values
             stats["map_to_truth"][i, j] = distance(m, prob.truth)
             stats["map_to_maximiser"][i, j] = distance(m, prob.maximiser)
@@ -269,14 +270,25 @@ def _main_variant(variants: list[str]) -> str:
     return "thesis2" if "thesis2" in variants else variants[0]
 
 
+def variant_options(pmc_options: dict, variant: str) -> dict:
+    """The PMC options of one variant: ``pmc_options``' plain keys apply to every variant, a
+    key naming a variant (``{"thesis2": {"initial": "grid"}}``) adds options for that one."""
+    shared = {k: v for k, v in pmc_options.items() if k not in VARIANTS}
+    return {**shared, **pmc_options.get(variant, {})}
+
+
 def check_config(config: dict) -> None:
     """Every PMC run of a trial can be built: variant × particle count × ``pmc_options``."""
     check_problem(config)
+    for key, value in config["pmc_options"].items():
+        if key in VARIANTS and not isinstance(value, dict):
+            raise ValueError(f"pmc_options[{key!r}] must be an object of options for variant "
+                             f"{key!r}, e.g. {{\"initial\": \"grid\"}}; got {value!r}")
     for variant in config["variants"]:
         for n in config["n_samples"]:
             check_sampler_options("pmc", {"n_samples": n, "n_iterations": config["n_iterations"],
                                           "variant": variant, "keep_history": True,
-                                          **config["pmc_options"]})
+                                          **variant_options(config["pmc_options"], variant)})
 
 
 def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
@@ -321,7 +333,8 @@ STUDY = Study(
         Setting("n_iterations", 20, "PMC iterations per run", check=positive),
         Setting("variants", ["thesis2", "mixture"], "PMC variants, each run on every scene",
                 choices=VARIANTS),
-        Setting("pmc_options", {}, "further keyword options of the PMC sampler"),
+        Setting("pmc_options", {}, "further keyword options of the PMC sampler, for every "
+                "variant, or for one under its name: {\"thesis2\": {\"initial\": \"grid\"}}"),
     ],
     check=check_config,
     quick={**QUICK, "n_samples": [64, 27], "n_iterations": 5},

@@ -69,8 +69,9 @@ def test_grid_from_face_to_face():
     assert g5.shape == (5, 2) and len(np.unique(g5, axis=0)) == 5
 
 
-@pytest.mark.parametrize("initial,faces", [("grid", False), ("grid_faces", True)])
+@pytest.mark.parametrize("initial,faces", [("grid", False), ("grid_faces", True), (None, True)])
 def test_thesis_variants_start_from_the_chosen_grid(initial, faces):
+    # the default (None) is the grid from face to face, the reading that reproduces Table 7.1
     seen = []
 
     class Recorder(CorrelatedGaussian):
@@ -204,8 +205,8 @@ def test_bad_target_and_seed():
 def test_variant_defaults():
     m, t2, lit = PMC(), PMC(variant="thesis2"), PMC(variant="thesis2_literal")
     assert (m.power, m.kernel, m.initial) == ("auto", "covariance", "halton")  # issue 12
-    assert (t2.power, t2.kernel, t2.initial) == (1e-4, "isotropic", "grid")  # issue 13
-    assert (lit.power, lit.kernel, lit.initial) == (0.01, "isotropic", "grid")
+    assert (t2.power, t2.kernel, t2.initial) == (1e-4, "isotropic", "grid_faces")  # issue 13
+    assert (lit.power, lit.kernel, lit.initial) == (0.01, "isotropic", "grid_faces")
     assert PMC(**m.get_config()).get_config() == m.get_config()  # config round-trips
 
 

@@ -26,7 +26,7 @@ for task in tasks(study, cfg)[: int(sys.argv[1])]:
     row = {}
     for j, n in enumerate([1000, 125, 64]):  # variant index 0 = thesis2: same seeds as the study
         post, _ = sample_traced("pmc", prob.target, run_seeds[j], n_samples=n, n_iterations=20,
-                                variant="thesis2", keep_history=True)
+                                variant="thesis2", initial="grid", keep_history=True)
         lw = post["history_log_weight"].values
         th = post["history_theta"].values
         lo = np.argmin(np.where(np.isfinite(lw), lw, np.inf), axis=1)

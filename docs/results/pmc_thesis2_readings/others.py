@@ -29,8 +29,9 @@ HERE = Path(__file__).resolve().parent
 OUT = HERE / "others.jsonl"
 
 SAMPLERS = {
+    # the cell-centred grid the rows ran with (the thesis variants' default until 2026-12-02)
     "pmc_thesis1": ("pmc", {"n_samples": 1000, "n_iterations": 20, "variant": "thesis1",
-                            "keep_history": True}),
+                            "initial": "grid", "keep_history": True}),
     # the thesis's weights, pinned: the library's defaults became "mixture" after the first
     # three scenes were run (those rows were made with "thesis", then the default)
     "sir_alternative": ("sir", {"n_samples": 1000, "n_iterations": 20,

@@ -266,7 +266,6 @@ def thesis1_step(cfg: Any, ctx: Context, state: PMCState, n: int,
                           log_target_next=lt[res]), lg
 
 
-
 #: Initial sets: the grid of cell centres, the grid from face to face (both "evenly
 #: spaced", 6.6), a scrambled Halton design.
 INITIAL_SETS = ("grid", "grid_faces", "halton")

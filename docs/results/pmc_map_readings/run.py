@@ -1,0 +1,122 @@
+"""Which particle is 7.4.1 step 6's "MAP sample"? Four readings on the study's own scenes.
+
+The thesis takes, at every iteration, "the sample θ with the highest probability weight π"
+(7.4.1 step 6) and says (7.4.2) "we could easily adjust the PMC sampler to store the best MAP
+sample through all the iterations": its MAP was *not* best-so-far. During the iterations its
+PMC evaluates only the sub-lattice PLs ("the PMC method uses the pseudolikelihood over all
+sites on the lattice (Eqn. 7.7) only at the end of 20 iterations"). This script reruns PMC (II)
+(``variant="thesis2"``, from the grid from face to face) on the scenes of
+``../pmc_convergence_faces/trials`` with the same run seeds and records, per iteration, the
+distance to the truth of
+
+* ``best_so_far``: our MAP, best under the full PL over the iterations' candidates (must equal
+  the committed trial's ``map_to_truth``, a check of the pairing);
+* ``top_pi``: the highest π = 1/G^n (the study's ``pimap``; the final iteration ePL/G);
+* ``top_g``: the highest G^n among the current particles, i.e. the highest resampling weight
+  (the final iteration: the highest ePL/G, the thesis's final π);
+* ``top_pl``: the highest full PL among the current particles (not best-so-far).
+
+Writes one netCDF per scene to ``trials/`` (resumes), then prints the mean per reading beside
+the thesis's Table 7.1 column. Usage (from the repository root)::
+
+    python docs/results/pmc_map_readings/run.py [n_scenes] [brdf] [n_labels]
+"""
+
+import json
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+
+import mrfpe
+from mrfpe.studies._thesis import PMC_TABLES
+from mrfpe.studies.pmc_convergence import variant_options
+from mrfpe.studies.synthetic import child_seeds, distance, problem_from_config
+
+HERE = Path(__file__).resolve().parent
+SOURCE = HERE.parent / "pmc_convergence_faces" / "trials"
+READINGS = ("best_so_far", "top_pi", "top_g", "top_pl")
+
+
+def one_scene(path: Path) -> xr.Dataset:
+    """Rerun the trial at ``path`` (its PMC (II) runs only) and score the four readings."""
+    with xr.open_dataset(path) as ds:
+        config, seed = json.loads(ds.attrs["trial_config"]), int(ds.attrs["seed"])
+        committed = ds["map_to_truth"].sel(variant="thesis2").values
+    variants, sizes, T = config["variants"], config["n_samples"], config["n_iterations"]
+    i = variants.index("thesis2")
+    s_problem, s_runs = child_seeds(seed, 2)
+    prob = problem_from_config({**config, "maximiser_grid": None}, s_problem)
+    run_seeds = child_seeds(s_runs, len(variants) * len(sizes))
+    out = np.full((len(READINGS), len(sizes), T), np.nan)
+    for j, n in enumerate(sizes):
+        post = mrfpe.sample("pmc", prob.target, seed=run_seeds[i * len(sizes) + j],
+                            n_samples=n, n_iterations=T, variant="thesis2", keep_history=True,
+                            **variant_options(config["pmc_options"], "thesis2"))
+        x, lw = post["history_theta"].values, post["history_log_weight"].values
+        steps = np.arange(T)
+        lw = np.where(np.isnan(lw), -np.inf, lw)
+        top_pi = np.argmax(lw, axis=1)
+        # iterations before the last: π = 1/G, so the highest G is the lowest finite π;
+        # the last iteration's π is already ePL/G (the thesis's final weights)
+        low = np.argmin(np.where(np.isfinite(lw), lw, np.inf), axis=1)
+        top_g = np.where(steps == T - 1, top_pi, low)
+        pl = prob.target.log_prob(x.reshape(-1, x.shape[-1])).reshape(x.shape[:2])
+        top_pl = np.argmax(np.where(np.isnan(pl), -np.inf, pl), axis=1)
+        out[0, j] = distance(post["map_theta"].values, prob.truth)
+        for r, idx in enumerate((top_pi, top_g, top_pl), start=1):
+            out[r, j] = distance(x[steps, idx], prob.truth)
+    if not np.allclose(out[0], committed, atol=1e-9):
+        raise RuntimeError(f"{path.name}: best-so-far differs from the committed trial")
+    return xr.Dataset({"map_to_truth": (("reading", "n_samples", "iteration"), out)},
+                      coords={"reading": list(READINGS), "n_samples": sizes,
+                              "iteration": np.arange(1, T + 1)},
+                      attrs={"source": path.name, "seed": seed,
+                             "trial_config": json.dumps(config, sort_keys=True)})
+
+
+def main() -> None:
+    warnings.simplefilter("ignore", mrfpe.PosteriorWarning)  # ESS ≈ 1 is PMC (II)'s, known
+    n_scenes = int(sys.argv[1]) if len(sys.argv) > 1 else 30
+    brdf = sys.argv[2] if len(sys.argv) > 2 else "ward"
+    labels = int(sys.argv[3]) if len(sys.argv) > 3 else 20
+    (HERE / "trials").mkdir(exist_ok=True)
+    sources = sorted(SOURCE.glob(f"brdf={brdf},n_labels={labels},repeat=*.nc"))[:n_scenes]
+    results = []
+    for path in sources:
+        dest = HERE / "trials" / path.name
+        if not dest.exists():
+            tmp = dest.with_suffix(".tmp")
+            one_scene(path).to_netcdf(tmp)
+            tmp.rename(dest)
+            print("done", path.name, flush=True)
+        with xr.open_dataset(dest) as ds:
+            results.append(ds["map_to_truth"].values)
+    res = np.array(results)
+    print(f"\n{brdf}, {labels} labels, {len(results)} scenes: mean MAP → truth "
+          "(± standard error over scenes)\n")
+    print("| N | reading | it 1 | it 5 | it 10 | it 15 | it 20 |")
+    print("|---|---|---|---|---|---|---|")
+    for j, n in enumerate((1000, 125, 64)):
+        ref = PMC_TABLES[(brdf, labels, n)][0]
+        print(f"| {n} | thesis | " + " | ".join(f"{ref[i - 1]:.3f}" for i in (1, 5, 10, 15, 20))
+              + " |")
+        for r, name in enumerate(READINGS):
+            m = res[:, r, j].mean(axis=0)
+            se = res[:, r, j].std(axis=0, ddof=1) / np.sqrt(len(results))
+            print(f"| {n} | {name} | " + " | ".join(f"{m[i - 1]:.3f} ± {se[i - 1]:.3f}"
+                                                   for i in (1, 5, 10, 15, 20)) + " |")
+    print("\nPaired difference top_g − best_so_far (mean ± standard error over scenes)\n")
+    print("| N | it 5 | it 10 | it 15 | it 20 |")
+    print("|---|---|---|---|---|")
+    for j, n in enumerate((1000, 125, 64)):
+        d = res[:, 2, j] - res[:, 0, j]
+        m, se = d.mean(axis=0), d.std(axis=0, ddof=1) / np.sqrt(len(results))
+        print(f"| {n} | " + " | ".join(f"{m[i - 1]:+.3f} ± {se[i - 1]:.3f}"
+                                      for i in (5, 10, 15, 20)) + " |")
+
+
+if __name__ == "__main__":
+    main()

@@ -16,7 +16,7 @@ distance to the truth of
   (the final iteration: the highest ePL/G, the thesis's final π);
 * ``top_pl``: the highest full PL among the current particles (not best-so-far).
 
-Writes one netCDF per scene to ``trials/`` (resumes), then prints the mean per reading beside
+Writes one netCDF per scene to ``scenes/`` (resumes), then prints the mean per reading beside
 the thesis's Table 7.1 column. Usage (from the repository root)::
 
     python docs/results/pmc_map_readings/run.py [n_scenes] [brdf] [n_labels]
@@ -82,11 +82,11 @@ def main() -> None:
     n_scenes = int(sys.argv[1]) if len(sys.argv) > 1 else 30
     brdf = sys.argv[2] if len(sys.argv) > 2 else "ward"
     labels = int(sys.argv[3]) if len(sys.argv) > 3 else 20
-    (HERE / "trials").mkdir(exist_ok=True)
+    (HERE / "scenes").mkdir(exist_ok=True)
     sources = sorted(SOURCE.glob(f"brdf={brdf},n_labels={labels},repeat=*.nc"))[:n_scenes]
     results = []
     for path in sources:
-        dest = HERE / "trials" / path.name
+        dest = HERE / "scenes" / path.name
         if not dest.exists():
             tmp = dest.with_suffix(".tmp")
             one_scene(path).to_netcdf(tmp)

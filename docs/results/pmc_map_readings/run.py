@@ -33,7 +33,7 @@ import xarray as xr
 import mrfpe
 from mrfpe.studies._thesis import PMC_TABLES
 from mrfpe.studies.pmc_convergence import variant_options
-from mrfpe.studies.synthetic import child_seeds, distance, problem_from_config
+from mrfpe.studies.synthetic import child_seeds, distance, highest_weight, problem_from_config
 
 HERE = Path(__file__).resolve().parent
 SOURCE = HERE.parent / "pmc_convergence_faces" / "trials"
@@ -57,17 +57,15 @@ def one_scene(path: Path) -> xr.Dataset:
                             **variant_options(config["pmc_options"], "thesis2"))
         x, lw = post["history_theta"].values, post["history_log_weight"].values
         steps = np.arange(T)
-        lw = np.where(np.isnan(lw), -np.inf, lw)
-        top_pi = np.argmax(lw, axis=1)
+        top_pi = highest_weight(post)
         # iterations before the last: π = 1/G, so the highest G is the lowest finite π;
         # the last iteration's π is already ePL/G (the thesis's final weights)
-        low = np.argmin(np.where(np.isfinite(lw), lw, np.inf), axis=1)
-        top_g = np.where(steps == T - 1, top_pi, low)
+        top_g = x[steps, np.argmin(np.where(np.isfinite(lw), lw, np.inf), axis=1)]
+        top_g[-1] = top_pi[-1]
         pl = prob.target.log_prob(x.reshape(-1, x.shape[-1])).reshape(x.shape[:2])
-        top_pl = np.argmax(np.where(np.isnan(pl), -np.inf, pl), axis=1)
-        out[0, j] = distance(post["map_theta"].values, prob.truth)
-        for r, idx in enumerate((top_pi, top_g, top_pl), start=1):
-            out[r, j] = distance(x[steps, idx], prob.truth)
+        top_pl = x[steps, np.argmax(np.where(np.isnan(pl), -np.inf, pl), axis=1)]
+        for r, theta in enumerate((post["map_theta"].values, top_pi, top_g, top_pl)):
+            out[r, j] = distance(theta, prob.truth)
     if not np.allclose(out[0], committed, atol=1e-9):
         raise RuntimeError(f"{path.name}: best-so-far differs from the committed trial")
     return xr.Dataset({"map_to_truth": (("reading", "n_samples", "iteration"), out)},

@@ -38,6 +38,14 @@ from mrfpe.studies.synthetic import child_seeds, distance, highest_weight, probl
 HERE = Path(__file__).resolve().parent
 SOURCE = HERE.parent / "pmc_convergence_faces" / "trials"
 READINGS = ("best_so_far", "top_pi", "top_g", "top_pl")
+ITERATIONS = (1, 5, 10, 15, 20)
+
+
+def mean_se(values: np.ndarray, iterations: tuple[int, ...], sign: str = "") -> str:
+    """Table cells ``mean ± standard error`` over scenes (axis 0) at the given iterations."""
+    m = values.mean(axis=0)
+    se = values.std(axis=0, ddof=1) / np.sqrt(values.shape[0])
+    return " | ".join(f"{m[i - 1]:{sign}.3f} ± {se[i - 1]:.3f}" for i in iterations)
 
 
 def one_scene(path: Path) -> xr.Dataset:
@@ -92,29 +100,22 @@ def main() -> None:
             print("done", path.name, flush=True)
         with xr.open_dataset(dest) as ds:
             results.append(ds["map_to_truth"].values)
+            sizes = [int(n) for n in ds["n_samples"].values]
     res = np.array(results)
     print(f"\n{brdf}, {labels} labels, {len(results)} scenes: mean MAP → truth "
           "(± standard error over scenes)\n")
-    print("| N | reading | it 1 | it 5 | it 10 | it 15 | it 20 |")
-    print("|---|---|---|---|---|---|---|")
-    for j, n in enumerate((1000, 125, 64)):
+    print("| N | reading | " + " | ".join(f"it {i}" for i in ITERATIONS) + " |")
+    print("|---|---|" + "---|" * len(ITERATIONS))
+    for j, n in enumerate(sizes):
         ref = PMC_TABLES[(brdf, labels, n)][0]
-        print(f"| {n} | thesis | " + " | ".join(f"{ref[i - 1]:.3f}" for i in (1, 5, 10, 15, 20))
-              + " |")
+        print(f"| {n} | thesis | " + " | ".join(f"{ref[i - 1]:.3f}" for i in ITERATIONS) + " |")
         for r, name in enumerate(READINGS):
-            m = res[:, r, j].mean(axis=0)
-            se = res[:, r, j].std(axis=0, ddof=1) / np.sqrt(len(results))
-            print(f"| {n} | {name} | " + " | ".join(f"{m[i - 1]:.3f} ± {se[i - 1]:.3f}"
-                                                   for i in (1, 5, 10, 15, 20)) + " |")
+            print(f"| {n} | {name} | {mean_se(res[:, r, j], ITERATIONS)} |")
     print("\nPaired difference top_g − best_so_far (mean ± standard error over scenes)\n")
-    print("| N | it 5 | it 10 | it 15 | it 20 |")
-    print("|---|---|---|---|---|")
-    for j, n in enumerate((1000, 125, 64)):
-        d = res[:, 2, j] - res[:, 0, j]
-        m, se = d.mean(axis=0), d.std(axis=0, ddof=1) / np.sqrt(len(results))
-        print(f"| {n} | " + " | ".join(f"{m[i - 1]:+.3f} ± {se[i - 1]:.3f}"
-                                      for i in (5, 10, 15, 20)) + " |")
-
+    print("| N | " + " | ".join(f"it {i}" for i in ITERATIONS[1:]) + " |")
+    print("|---|" + "---|" * len(ITERATIONS[1:]))
+    for j, n in enumerate(sizes):
+        print(f"| {n} | {mean_se(res[:, 2, j] - res[:, 0, j], ITERATIONS[1:], '+')} |")
 
 if __name__ == "__main__":
     main()

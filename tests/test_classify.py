@@ -10,10 +10,12 @@ from mrfpe.classify import (
     error_stats,
     knn_accuracy,
     knn_predict,
+    merge_ties,
     plot_similarity,
     similarity_matrix,
 )
 from mrfpe.distances import get
+from mrfpe.distances.grid import correlation_matrix
 from mrfpe.posterior import build
 
 NAN = np.nan
@@ -65,8 +67,36 @@ def test_ties_count_as_no_error():
     # row 0: intra {5}, extra {5, 1} -> nothing.  row 1: intra {5}, extra {2, 2} -> nothing.
     # row 2: intra {3}, extra {1, 3} -> tie, nothing.  row 3: intra {4}, extra {4, 4} -> nothing.
     assert error_stats(S, classes) == {"miss": 0, "wnn": 0, "nn1": 0}
-    S[2, 1] = 3.0 + 1e-12  # a hair above the tie is an error
+    S[2, 1] = 3.0 + 1e-10  # a hair above the tie is an error
     assert error_stats(S, classes) == {"miss": 1, "wnn": 1, "nn1": 1}
+    S[2, 1] = np.nextafter(np.nextafter(3.0, 4.0), 4.0)  # two ulps above: rounding, a tie
+    assert error_stats(S, classes) == {"miss": 0, "wnn": 0, "nn1": 0}
+
+
+def test_ties_are_exact_arithmetic_not_rounding():
+    # One-hot weight vectors on a 1000-point grid: the correlation of any two with their
+    # weight on different points is -1/999 in exact arithmetic, but the product rounds it
+    # a few ulps either way; the statistics and the neighbours must not depend on that.
+    n, rng = 1000, np.random.default_rng(3)
+    classes = np.repeat(np.arange(4), 3)
+    w = np.full((classes.size, n), 1e-300)
+    w[np.arange(classes.size), rng.permutation(n)[:classes.size]] = 1.0
+    S = correlation_matrix(w)
+    off = ~np.eye(classes.size, dtype=bool)
+    assert np.ptp(S[off]) < 1e-15
+    exact = np.full_like(S, -1.0 / (n - 1))
+    for noisy in (S, exact + 1e-18 * rng.standard_normal(S.shape)):
+        assert error_stats(noisy, classes) == error_stats(exact, classes) == {
+            "miss": 0, "wnn": 0, "nn1": 0}
+        assert np.array_equal(knn_predict(noisy, classes), knn_predict(exact, classes))
+
+
+def test_merge_ties_keeps_real_gaps_and_infinities():
+    S = np.array([[9.0, 1.0, -np.inf], [1.0 + 1e-15, 9.0, 2.0], [2.0 + 1e-9, np.inf, 9.0]])
+    M = merge_ties(S)
+    assert M[1, 0] == 1.0  # 1e-15 relative: the same value as S[0, 1]
+    assert M[2, 0] == 2.0 + 1e-9 and M[1, 2] == 2.0  # 5e-10 relative: a real gap
+    assert M[0, 2] == -np.inf and M[2, 1] == np.inf and np.all(np.diag(M) == 9.0)
 
 
 def test_the_diagonal_is_ignored_whatever_it_holds():

@@ -1,11 +1,14 @@
 """Partitioned particle filtering over one time step (thesis 5.3, 5.32–5.35).
 
 The initial set is the evenly spaced grid representing the uniform
-``p(X^0)`` (equal weights). For each partition ``n = 1..P``: multiply the
-weights by the importance function (5.33) ``π ← π g^n(x)``, resample with
-Gaussian noise ``σ_n`` (the thesis's multinomial resampling by default),
-and divide by the importance function at the new positions (5.34)
-``π ← π / g^n(x)``, so the set again represents the uniform distribution,
+``p(X^0)`` (equal weights): ``initial="grid_faces"`` (from face to face, the
+default with the thesis's weights, as for PMC's thesis variants) or ``"grid"`` (the
+cell centres, the default with the mixture weights); :func:`~mrfpe.samplers.kit.grid`.
+For each partition ``n = 1..P``: multiply the weights by the importance
+function (5.33) ``π ← π g^n(x)``, resample with Gaussian noise ``σ_n`` (the
+thesis's multinomial resampling by default), and divide by the importance
+function at the new positions (5.34) ``π ← π / g^n(x)``, so the set again
+represents the uniform distribution,
 concentrated where the ``g^n`` are large. Finally (5.35) ``π ← π ϱ(x)``
 with the full target.
 
@@ -80,12 +83,16 @@ class PPF(Sampler):
     def __init__(self, n_samples: int = 1000, n_partitions: int = 20, *, k: int = 3,
                  partition: str = "strided", power: float | str | None = None,
                  sigma0: float = 0.07, resampling: str = "multinomial",
-                 weights: str = "mixture", keep_history: bool = False):
+                 weights: str = "mixture", initial: str | None = None,
+                 keep_history: bool = False):
         self.n_samples = check_positive_int("n_samples", n_samples, 2)
         self.n_partitions = check_positive_int("n_partitions", n_partitions, 1)
         self.k = check_positive_int("k", k, 1)
         self.partition = check_choice("partition", partition, ("strided", "block"))
         self.weights = check_choice("weights", weights, ("mixture", "thesis"))
+        if initial is None:
+            initial = "grid_faces" if self.weights == "thesis" else "grid"
+        self.initial = check_choice("initial", initial, ("grid", "grid_faces"))
         if power is None:  # the weights' default: adaptive for "mixture", 5.69 fixed for thesis
             power = "auto" if self.weights == "mixture" else THESIS_POWER
         if isinstance(power, str):
@@ -107,7 +114,7 @@ class PPF(Sampler):
         """The PMC whose mixture step is this PPF's with the jitter accounted for."""
         return PMC(self.n_samples, self.n_partitions, variant="mixture", k=self.k,
                    partition=self.partition, power=self.power, sigma0=self.sigma0,
-                   kernel="covariance", resampling=self.resampling, initial="grid")
+                   kernel="covariance", resampling=self.resampling, initial=self.initial)
 
     def run(self, target: Any, *, seed: int | None = None, progress: bool = False,
             callback: Callback | None = None) -> xr.Dataset:
@@ -123,7 +130,8 @@ class PPF(Sampler):
             G, cfg, step = parts, self._mixture_config(), mixture_step
         run = Run(target, P, progress=progress, callback=callback, desc="ppf")
         ctx = Context(run, np.random.default_rng(seed), bounds)
-        state = init_state(grid(bounds, self.n_samples), self.power)  # p(X^0): uniform
+        start = grid(bounds, self.n_samples, faces=self.initial == "grid_faces")
+        state = init_state(start, self.power)  # p(X^0): uniform
         history = History(self.keep_history)
         for n in range(P):
             state, lg = step(cfg, ctx, state, n, G[n % len(G)])

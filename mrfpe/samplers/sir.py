@@ -9,6 +9,11 @@ so that after the last step the weighted set represents ``ϱ`` itself. Step 0
 weights the evenly spaced grid (the uniform ``p(X^0)``). Every step evaluates
 the full target.
 
+The evenly spaced set is ``initial``: ``"grid_faces"`` (from face to face, the
+default with the thesis's weights, as for PMC's thesis variants: the reading of
+"evenly spaced" that reproduces Table 7.1) or ``"grid"`` (cell centres, the default
+with the mixture weights); :func:`~mrfpe.samplers.kit.grid`.
+
 ``variant="alternative"`` (5.29–5.31), importance reweighting: at every step
 the fixed evenly spaced set ``x^U`` is weighted by the importance function
 ``g^t`` (5.29), resampled with noise ``σ_t``, and reweighted by
@@ -83,7 +88,7 @@ class SIR(Sampler):
                  variant: str = "classic", sigma0: float = 0.07,
                  resampling: str = "multinomial", k: int = 3, partition: str = "strided",
                  power: float = THESIS_POWER, weights: str = "mixture",
-                 keep_history: bool = False):
+                 initial: str | None = None, keep_history: bool = False):
         self.n_samples = check_positive_int("n_samples", n_samples, 2)
         self.n_iterations = check_positive_int("n_iterations", n_iterations, 1)
         self.variant = check_choice("variant", variant, ("classic", "alternative"))
@@ -93,6 +98,9 @@ class SIR(Sampler):
         self.partition = check_choice("partition", partition, ("strided", "block"))
         self.power = check_range("power", power, 0.0, np.inf, low_open=True, high_open=True)
         self.weights = check_choice("weights", weights, ("mixture", "thesis"))
+        if initial is None:
+            initial = "grid_faces" if self.weights == "thesis" else "grid"
+        self.initial = check_choice("initial", initial, ("grid", "grid_faces"))
         self.keep_history = check_bool("keep_history", keep_history)
 
     def sigma(self, t: int) -> float:
@@ -107,10 +115,11 @@ class SIR(Sampler):
         rng = np.random.default_rng(seed)
         run = Run(target, self.n_iterations, progress=progress, callback=callback,
                   desc=f"sir/{self.variant}")
+        x = grid(bounds, self.n_samples, faces=self.initial == "grid_faces")  # p(X^0)
         step = self._classic_step if self.variant == "classic" else self._alternative_step(
-            target, run, grid(bounds, self.n_samples))
+            target, run, x)
         history = History(self.keep_history)
-        x, lw = grid(bounds, self.n_samples), np.zeros(self.n_samples)
+        lw = np.zeros(self.n_samples)
         for t in range(self.n_iterations):
             x, lt, lw, mixture = step(t, x, lw, target, run, rng, bounds)
             run.offer(x, lt)

@@ -207,13 +207,16 @@ def _ranks(S: np.ndarray) -> np.ndarray:
     """Off-diagonal entries replaced by their ranks in [0, 1] (diagonal NaN) for display.
 
     Like the thesis's linear rescaling of its tables, any increasing map leaves every
-    classification statistic unchanged; ranks keep heavy-tailed distances readable.
+    classification statistic unchanged; ranks keep heavy-tailed distances readable. Ties
+    are the statistics' ties (:func:`mrfpe.classify.merge_ties`), ranked together.
     """
     from scipy.stats import rankdata
 
+    from mrfpe.classify import merge_ties
+
     off = ~np.eye(S.shape[0], dtype=bool)
     out = np.full(S.shape, np.nan)
-    r = rankdata(S[off])
+    r = rankdata(merge_ties(S)[off])
     out[off] = (r - 1) / max(r.size - 1, 1)
     return out
 
@@ -309,6 +312,9 @@ def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
         fig.suptitle(f"Similarity matrices, {brdf}, shown as ranks of the off-diagonal "
                      "entries (Tables 8.3-8.5 as pictures)", fontsize=9)
         figs.append(save_figure(fig, out_dir / f"similarity_{brdf}.png"))
+    weights = config["evolved_weights"]
+    if weights == "auto":  # name what it resolved to
+        weights += f": {'uniform' if uniform else 'sampler'}"
     sections.insert(1, "## Information in the feature sets\n\nKish's ESS of each specimen's "
                     "normalised weights (1 = one point carries all the weight) and the weighted "
                     "standard deviation of its parameters (median over specimens of the mean "
@@ -317,8 +323,8 @@ def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
                     "Patrick-Fisher, Mahalanobis) compare the spread of a few points, i.e. "
                     "noise. Unevolved sets against the power λ on their target weights, "
                     "evolved sets under their two weightings; ← marks the tables' setting "
-                    f"(`grid_power` = {lam:g}, `evolved_weights` = {config['evolved_weights']}: "
-                    f"{'uniform' if uniform else 'sampler'}).\n\n" + markdown_table(
+                    f"(`grid_power` = {lam:g}, `evolved_weights` = {weights}).\n\n"
+                    + markdown_table(
                         ["brdf", "set", "λ / weights", "median ESS", "min ESS",
                          f"ESS < {10 * _DIM}", "median sd"], ess_rows))
     sections += [f"![{f}]({f})" for f in figs]

@@ -9,12 +9,15 @@ from mrfpe.samplers.ppf import PPF
 from mrfpe.testing import CorrelatedGaussian, TwoModes
 
 
+@pytest.mark.parametrize("initial", [None, "grid"])
 @pytest.mark.parametrize("target", [CorrelatedGaussian(), TwoModes()])
-def test_ppf_equals_pmc_thesis2(target):
-    # Thesis 5.6: PPF over a single time step is PMC; two independent implementations agree.
-    a = PPF(n_samples=150, n_partitions=6, k=3, power=0.5, weights="thesis").run(target, seed=7)
+def test_ppf_equals_pmc_thesis2(target, initial):
+    # Thesis 5.6: PPF over a single time step is PMC; two independent implementations agree,
+    # from the thesis variants' default grid (face to face) and from the cell centres.
+    a = PPF(n_samples=150, n_partitions=6, k=3, power=0.5, weights="thesis",
+            initial=initial).run(target, seed=7)
     b = PMC(n_samples=150, n_iterations=6, k=3, power=0.5, variant="thesis2_literal",
-            initial="grid").run(target, seed=7)  # PPF starts from the cell centres
+            initial=initial).run(target, seed=7)
     for v in ("theta", "log_weight", "log_target", "map_theta", "map_log_target", "ess"):
         assert np.array_equal(a[v].values, b[v].values, equal_nan=True), v
     assert a.attrs["n_target_evals"] == b.attrs["n_target_evals"]
@@ -41,6 +44,8 @@ def test_history_and_bad_config():
         PPF(partition="random")
     with pytest.raises(ValueError, match="weights"):
         PPF(weights="raw")
+    with pytest.raises(ValueError, match="initial"):
+        PPF(initial="halton")
     with pytest.raises(ValueError, match="power"):
         PPF(weights="thesis", power="auto")
 

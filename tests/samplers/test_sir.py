@@ -18,6 +18,18 @@ def test_one_step_classic_is_importance_sampling_from_the_grid():
     assert np.allclose(post["log_weight"], P.normalise_log_weights(t.log_prob(g)))
 
 
+@pytest.mark.parametrize(("kw", "faces"), [
+    ({"weights": "thesis"}, True), ({"weights": "thesis", "initial": "grid"}, False),
+    ({"initial": "grid_faces"}, True),
+])
+def test_initial_grid_reading(kw, faces):
+    # the thesis's weights start from the grid from face to face (as PMC's thesis variants),
+    # the mixture weights from the cell centres; either on request
+    t = TwoModes()
+    post = SIR(n_samples=125, n_iterations=1, **kw).run(t, seed=0)
+    assert np.array_equal(post["theta"].values, grid(t.bounds, 125, faces=faces))
+
+
 def test_classic_tempering_reaches_the_target():
     t = CorrelatedGaussian()
     post = SIR(n_samples=1000, n_iterations=8, weights="thesis").run(t, seed=1)
@@ -53,7 +65,7 @@ def test_reproducible_and_bounds():
 @pytest.mark.parametrize(("kw", "match"), [
     ({"variant": "modern"}, "variant"), ({"n_iterations": 0}, "n_iterations"),
     ({"sigma0": 0}, "sigma0"), ({"resampling": 1}, "resampling"), ({"power": -2}, "power"),
-    ({"weights": "raw"}, "weights"),
+    ({"weights": "raw"}, "weights"), ({"initial": "halton"}, "initial"),
 ])
 def test_bad_config(kw, match):
     with pytest.raises(ValueError, match=match):

@@ -34,11 +34,21 @@ SAMPLERS = {
                             "initial": "grid", "keep_history": True}),
     # the thesis's weights, pinned: the library's defaults became "mixture" after the first
     # three scenes were run (those rows were made with "thesis", then the default)
+    # (and the cell centres, which SIR and PPF always started from until 2026-12-03)
     "sir_alternative": ("sir", {"n_samples": 1000, "n_iterations": 20,
                                 "variant": "alternative", "weights": "thesis",
-                                "keep_history": True}),
+                                "initial": "grid", "keep_history": True}),
     "ppf": ("ppf", {"n_samples": 1000, "n_partitions": 20, "k": 3, "weights": "thesis",
-                    "keep_history": True}),
+                    "initial": "grid", "keep_history": True}),
+    # the same three from the grid from face to face, their thesis weights' default since
+    # 2026-12-02 (PMC) and 2026-12-03 (SIR, PPF)
+    "pmc_thesis1_faces": ("pmc", {"n_samples": 1000, "n_iterations": 20, "variant": "thesis1",
+                                  "initial": "grid_faces", "keep_history": True}),
+    "sir_alternative_faces": ("sir", {"n_samples": 1000, "n_iterations": 20,
+                                      "variant": "alternative", "weights": "thesis",
+                                      "initial": "grid_faces", "keep_history": True}),
+    "ppf_faces": ("ppf", {"n_samples": 1000, "n_partitions": 20, "k": 3, "weights": "thesis",
+                          "initial": "grid_faces", "keep_history": True}),
     "dw_r_absolute": ("dw_r", {"n_steps": 20000, "initial_weight": "absolute"}),
     "dw_q_absolute": ("dw_q", {"n_steps": 20000, "initial_weight": "absolute"}),
     "dw_r_relative": ("dw_r", {"n_steps": 20000, "initial_weight": "relative"}),

@@ -40,15 +40,6 @@ SAMPLERS = {
                                 "initial": "grid", "keep_history": True}),
     "ppf": ("ppf", {"n_samples": 1000, "n_partitions": 20, "k": 3, "weights": "thesis",
                     "initial": "grid", "keep_history": True}),
-    # the same three from the grid from face to face, their thesis weights' default since
-    # 2026-12-02 (PMC) and 2026-12-03 (SIR, PPF)
-    "pmc_thesis1_faces": ("pmc", {"n_samples": 1000, "n_iterations": 20, "variant": "thesis1",
-                                  "initial": "grid_faces", "keep_history": True}),
-    "sir_alternative_faces": ("sir", {"n_samples": 1000, "n_iterations": 20,
-                                      "variant": "alternative", "weights": "thesis",
-                                      "initial": "grid_faces", "keep_history": True}),
-    "ppf_faces": ("ppf", {"n_samples": 1000, "n_partitions": 20, "k": 3, "weights": "thesis",
-                          "initial": "grid_faces", "keep_history": True}),
     "dw_r_absolute": ("dw_r", {"n_steps": 20000, "initial_weight": "absolute"}),
     "dw_q_absolute": ("dw_q", {"n_steps": 20000, "initial_weight": "absolute"}),
     "dw_r_relative": ("dw_r", {"n_steps": 20000, "initial_weight": "relative"}),
@@ -56,6 +47,11 @@ SAMPLERS = {
     "dw_r_absolute_per_node": ("dw_r", {"n_steps": 20000, "initial_weight": "absolute"}),
     "dw_q_absolute_per_node": ("dw_q", {"n_steps": 20000, "initial_weight": "absolute"}),
 }
+# the same three from the grid from face to face, their thesis weights' default since
+# 2026-12-02 (PMC) and 2026-12-03 (SIR, PPF)
+SAMPLERS.update({f"{label}_faces": (SAMPLERS[label][0],
+                                    {**SAMPLERS[label][1], "initial": "grid_faces"})
+                 for label in ("pmc_thesis1", "sir_alternative", "ppf")})
 
 
 def _readings():

@@ -83,6 +83,7 @@ import xarray as xr
 
 from mrfpe.samplers.base import Callback, Sampler, check_choice, check_positive_int, check_range
 from mrfpe.samplers.kit import (
+    GRID_READINGS,
     RESAMPLING_METHODS,
     THESIS2_POWER,
     THESIS_POWER,
@@ -268,7 +269,7 @@ def thesis1_step(cfg: Any, ctx: Context, state: PMCState, n: int,
 
 #: Initial sets: the grid of cell centres, the grid from face to face (both "evenly
 #: spaced", 6.6), a scrambled Halton design.
-INITIAL_SETS = ("grid", "grid_faces", "halton")
+INITIAL_SETS = (*GRID_READINGS, "halton")
 
 STEPS: dict[str, Step] = {"mixture": mixture_step, "thesis2": thesis2_step,
                           "thesis2_literal": thesis2_literal_step, "thesis1": thesis1_step}

@@ -54,6 +54,7 @@ from mrfpe.samplers.kit import (
     check_target,
     ess,
     grid,
+    grid_reading,
     partition_or_none,
     softened,
 )
@@ -90,9 +91,7 @@ class PPF(Sampler):
         self.k = check_positive_int("k", k, 1)
         self.partition = check_choice("partition", partition, ("strided", "block"))
         self.weights = check_choice("weights", weights, ("mixture", "thesis"))
-        if initial is None:
-            initial = "grid_faces" if self.weights == "thesis" else "grid"
-        self.initial = check_choice("initial", initial, ("grid", "grid_faces"))
+        self.initial = grid_reading(initial, thesis=self.weights == "thesis")
         if power is None:  # the weights' default: adaptive for "mixture", 5.69 fixed for thesis
             power = "auto" if self.weights == "mixture" else THESIS_POWER
         if isinstance(power, str):

@@ -64,6 +64,7 @@ from mrfpe.samplers.kit import (
     covariance_kernel,
     ess,
     grid,
+    grid_reading,
     jitter,
     jitter_mixture,
     log_box_volume,
@@ -98,9 +99,7 @@ class SIR(Sampler):
         self.partition = check_choice("partition", partition, ("strided", "block"))
         self.power = check_range("power", power, 0.0, np.inf, low_open=True, high_open=True)
         self.weights = check_choice("weights", weights, ("mixture", "thesis"))
-        if initial is None:
-            initial = "grid_faces" if self.weights == "thesis" else "grid"
-        self.initial = check_choice("initial", initial, ("grid", "grid_faces"))
+        self.initial = grid_reading(initial, thesis=self.weights == "thesis")
         self.keep_history = check_bool("keep_history", keep_history)
 
     def sigma(self, t: int) -> float:

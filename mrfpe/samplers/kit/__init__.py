@@ -73,7 +73,13 @@ from mrfpe.resampling import METHODS as RESAMPLING_METHODS
 from mrfpe.resampling import ess, log_ratio, normalise_log_weights, perplexity, resample
 from mrfpe.samplers.kit.batching import map_batched
 from mrfpe.samplers.kit.chains import ESS_CHECKPOINTS, KeptStates, check_chain_length
-from mrfpe.samplers.kit.draws import draw_in_support, grid, space_filling
+from mrfpe.samplers.kit.draws import (
+    GRID_READINGS,
+    draw_in_support,
+    grid,
+    grid_reading,
+    space_filling,
+)
 from mrfpe.samplers.kit.evidence import (
     MASS_DRAWS,
     box_log_evidence,
@@ -103,6 +109,7 @@ from mrfpe.validation import (
 
 __all__ = [
     "ESS_CHECKPOINTS",
+    "GRID_READINGS",
     "MASS_DRAWS",
     "RESAMPLING_METHODS",
     "THESIS2_POWER",
@@ -122,6 +129,7 @@ __all__ = [
     "draw_in_support",
     "ess",
     "grid",
+    "grid_reading",
     "jitter",
     "jitter_mixture",
     "jitter_resampled",

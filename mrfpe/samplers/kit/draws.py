@@ -7,6 +7,8 @@ from typing import Any
 
 import numpy as np
 
+from mrfpe.validation import check_choice
+
 __all__ = ["draw_in_support", "grid", "space_filling"]
 
 
@@ -36,6 +38,19 @@ def grid(bounds: np.ndarray, n: int, *, faces: bool = False) -> np.ndarray:
     if pts.shape[0] == n:
         return pts
     return pts[np.round(np.linspace(0, pts.shape[0] - 1, n)).astype(np.int64)]
+
+
+#: The two readings of "evenly spaced" (:func:`grid`): cell centres, face to face.
+GRID_READINGS = ("grid", "grid_faces")
+
+
+def grid_reading(initial: str | None, *, thesis: bool) -> str:
+    """The initial grid ``initial`` checked against :data:`GRID_READINGS`; ``None`` picks
+    ``"grid_faces"`` for the thesis's weights (the reading that reproduces Table 7.1) and
+    ``"grid"`` otherwise."""
+    if initial is None:
+        return "grid_faces" if thesis else "grid"
+    return check_choice("initial", initial, GRID_READINGS)
 
 
 def draw_in_support(run: Any, target: Any, rng: np.random.Generator, n: int,

@@ -74,7 +74,14 @@ def new_figure(nrows: int = 1, ncols: int = 1, size: tuple[float, float] = (6.4,
 
 
 def save_figure(fig: Any, path: Path, dpi: int = 110) -> str:
-    """Save ``fig`` as PNG; return its file name (for a markdown link)."""
+    """Save ``fig`` as PNG; return its file name (for a markdown link).
+
+    Panels with nothing drawn in them (a grid cell with no results yet, or the spare
+    cell of a 2 × 2 grid over three label counts) are hidden, not shown as empty frames.
+    """
+    for ax in fig.axes:
+        if not ax.has_data():
+            ax.set_visible(False)
     fig.savefig(path, dpi=dpi)
     return Path(path).name
 

@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from mrfpe.studies.report import fmt, markdown_table, mean_sd
+from mrfpe.studies.report import fmt, markdown_table, mean_sd, new_figure, save_figure
 
 
 @pytest.mark.parametrize(("mean", "sd", "text"), [
@@ -30,3 +30,11 @@ def test_mean_sd_sd_has_two_significant_digits(mean, sd):
 def test_tables_format_numbers_and_missing_values():
     assert fmt(None) == "–" and fmt(float("nan")) == "–" and fmt(3) == "3"
     assert markdown_table(["a", "b"], [[1, 0.123456]]).splitlines()[-1] == "| 1 | 0.1235 |"
+
+
+def test_save_figure_hides_empty_panels(tmp_path):
+    fig, axes = new_figure(2, 2)
+    for ax in axes.ravel()[:3]:
+        ax.plot([0, 1], [1, 0])
+    assert save_figure(fig, tmp_path / "f.png") == "f.png" and (tmp_path / "f.png").is_file()
+    assert [ax.get_visible() for ax in axes.ravel()] == [True, True, True, False]

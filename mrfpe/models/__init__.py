@@ -1,0 +1,1 @@
+"""Declared Markov random fields: graph, states and potentials in; every estimator out."""

@@ -1,0 +1,202 @@
+"""The estimators a declared discrete MRF generates, each a batched :class:`Target`.
+
+* :class:`ConditionalTarget` -- composite likelihoods of full conditionals:
+  Besag's pseudolikelihood ``"pl"`` (Besag 1975; thesis 4.23-4.24), the coding
+  estimator ``"coding"`` (Besag 1974 Sec. 6.1: the conditionals of one colour
+  class, which are independent given the rest, so the coding likelihood is a
+  true conditional likelihood) and block pseudolikelihood ``"block"`` (the
+  conditionals of tiles given their Markov blankets; the generic form of the
+  thesis's PL2/PL3 idea of richer local terms, and of Asuncion et al. 2010).
+  The codings' log-likelihoods sum to the PL.
+* :class:`ExactTarget` -- ``sum_m S(x_m) . psi - M log Z(psi)`` with ``log Z``
+  from :mod:`mrfpe.models.exact`.
+* :class:`LikelihoodTarget` -- the unnormalised log-likelihood ``S(x) . psi``
+  with the model's simulator: the input of doubly-intractable samplers
+  (exchange algorithm, Murray, Ghahramani & MacKay 2006).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from mrfpe.models.design import MAX_BLOCK_CONFIGURATIONS, ConditionalRows, Design, \
+    softmax_rows_log_prob
+from mrfpe.models.graph import Graph
+from mrfpe.targets.base import Target, as_theta_batch
+
+__all__ = ["ConditionalTarget", "ExactTarget", "LikelihoodTarget", "ModelTarget",
+           "make_blocks"]
+
+
+class ModelTarget(Target):
+    """What every target of a declared model shares: parameters, data, description."""
+
+    data_kind = "configurations"
+
+    def __init__(self, *, model: Any, design: Design, x: np.ndarray,
+                 param_names: Sequence[str], bounds: np.ndarray, estimator: str,
+                 cost: float = 1.0, extra: dict | None = None) -> None:
+        self.model = model
+        self.design = design
+        self.x = x
+        self.param_names = tuple(param_names)
+        self.bounds = np.asarray(bounds, dtype=np.float64)
+        self.estimator = estimator
+        self.name = f"{model.name}:{estimator}"
+        self.cost = float(cost)
+        self._extra = dict(extra or {})
+
+    def sufficient_statistics(self, x: Any = None) -> np.ndarray:
+        """``S(x)`` (M, P) of configurations ``x`` (default: the data)."""
+        x = self.x if x is None else np.asarray(x).reshape(-1, self.design.graph.n_nodes)
+        return self.design.statistics(x)
+
+    def describe(self) -> dict:
+        g = self.design.graph
+        return {"name": self.name, "class": type(self).__name__, "model": self.model.name,
+                "estimator": self.estimator, "param_names": list(self.param_names),
+                "bounds": self.bounds.tolist(), "n_states": self.design.q,
+                "graph": g.describe(), "n_configurations": int(self.x.shape[0]),
+                "cost": self.cost, **self._extra}
+
+
+class ConditionalTarget(ModelTarget):
+    """``sum_r w_r log p(alternative_r | blanket_r)`` over distinct conditional rows."""
+
+    def __init__(self, *, rows: Sequence[ConditionalRows], **kwargs: Any) -> None:
+        super().__init__(**kwargs)
+        self.rows = tuple(rows)
+
+    @property
+    def n_rows(self) -> int:
+        """Distinct conditional rows kept (the cost of one evaluation)."""
+        return sum(g.n_rows for g in self.rows)
+
+    def _row_bytes(self) -> float:
+        return 8.0 * 3 * min(sum(g.n_rows * g.G.shape[1] for g in self.rows), 1 << 15)
+
+    def _log_prob(self, theta: np.ndarray) -> np.ndarray:
+        return softmax_rows_log_prob(self.rows, self.design.psi(theta))
+
+    def describe(self) -> dict:
+        return {**super().describe(), "n_distinct_rows": self.n_rows}
+
+
+class ExactTarget(ModelTarget):
+    """The exact log-likelihood ``sum_m log p(x_m | theta)`` (tractable models only)."""
+
+    def __init__(self, *, method: str = "auto", **kwargs: Any) -> None:
+        super().__init__(**kwargs)
+        from mrfpe.models.exact import LogPartition
+
+        self._log_z = LogPartition(self.design, method)  # raises, saying why, if intractable
+        self._stats = self.design.statistics(self.x).sum(axis=0)
+        self.method = self._log_z.method
+
+    def log_partition(self, theta: Any) -> np.ndarray:
+        """``log Z(theta)`` (N,)."""
+        theta = as_theta_batch(theta, self.ndim)
+        return self._log_z(self.design.psi(theta))
+
+    def _log_prob(self, theta: np.ndarray) -> np.ndarray:
+        psi = self.design.psi(theta)
+        return psi @ self._stats - self.x.shape[0] * self._log_z(psi)
+
+    def describe(self) -> dict:
+        return {**super().describe(), "method": self.method}
+
+
+class LikelihoodTarget(ModelTarget):
+    """Unnormalised log-likelihood ``sum_m S(x_m) . psi(theta)`` with a simulator.
+
+    ``log_prob`` omits ``-M log Z(theta)``: it is *not* a density over theta on
+    its own. Samplers for doubly-intractable posteriors use it with
+    :meth:`simulate` (auxiliary draws at a proposed theta).
+    """
+
+    def __init__(self, *, sampler: str = "auto", n_sweeps: int = 200, **kwargs: Any) -> None:
+        super().__init__(**kwargs)
+        self.sampler = sampler
+        self.n_sweeps = int(n_sweeps)
+        self._stats = self.design.statistics(self.x).sum(axis=0)
+        self._extra.update({"sampler": sampler, "n_sweeps": self.n_sweeps})
+
+    @property
+    def n_observations(self) -> int:
+        return int(self.x.shape[0])
+
+    def unnormalised(self, theta: Any, x: Any = None) -> np.ndarray:
+        """``S(x) . psi(theta)`` (N,) for configurations ``x`` (default the data, summed)."""
+        theta = as_theta_batch(theta, self.ndim)
+        s = self._stats if x is None else self.sufficient_statistics(x).sum(axis=0)
+        return self.design.psi(theta) @ s
+
+    def _log_prob(self, theta: np.ndarray) -> np.ndarray:
+        return self.design.psi(theta) @ self._stats
+
+    def simulate(self, theta: Any, n: int | None = None, *, seed: Any = None,
+                 init: Any = "random", n_sweeps: int | None = None) -> np.ndarray:
+        """``n`` configurations (default as many as observed) at ``theta``: (n, n_nodes)."""
+        from mrfpe.models.simulate import simulate
+
+        th = as_theta_batch(theta, self.ndim)
+        if th.shape[0] != 1:
+            raise ValueError(f"theta must be one parameter vector; got {th.shape[0]}")
+        return simulate(self.design, self.design.psi(th)[0], n=self.n_observations if n is None
+                        else n, seed=seed, method=self.sampler,
+                        n_sweeps=self.n_sweeps if n_sweeps is None else n_sweeps, init=init)
+
+
+def make_blocks(graph: Graph, block: Any, q: int) -> list[np.ndarray]:
+    """Node blocks from a tile ``(bh, bw)`` (lattice), a size, labels or explicit arrays.
+
+    Tiles are anchored at the top-left corner; partial tiles fill the right and
+    bottom edges. On a general graph an integer ``m`` groups nodes in
+    consecutive runs of ``m`` (give labels or arrays for a meaningful partition).
+    Every block must have at most :data:`MAX_BLOCK_CONFIGURATIONS` joint states.
+    """
+    n = graph.n_nodes
+    if isinstance(block, tuple):
+        if graph.shape is None:
+            raise ValueError("block must be a node partition (labels or arrays) on a general "
+                             "graph; a tile (bh, bw) needs a lattice")
+        H, W = graph.shape
+        bh, bw = block
+        r, c = np.divmod(np.arange(n), W)
+        labels = (r // bh) * (-(-W // bw)) + c // bw
+    elif isinstance(block, int):
+        labels = np.arange(n) // block
+    elif isinstance(block, np.ndarray):
+        labels = block
+        if labels.shape != (n,):
+            raise ValueError(f"block labels must have one entry per node ({n}); got "
+                             f"{labels.shape}")
+    else:
+        blocks = [np.asarray(b, dtype=np.int64) for b in block]
+        allnodes = np.concatenate(blocks) if blocks else np.zeros(0, np.int64)
+        if allnodes.size and (allnodes.min() < 0 or allnodes.max() >= n):
+            raise ValueError(f"block node ids must lie in [0, {n - 1}]")
+        if np.unique(allnodes).size != allnodes.size:
+            raise ValueError("blocks must be disjoint (a node appears in two blocks)")
+        if allnodes.size != n:
+            raise ValueError(f"blocks must cover every node; {n - allnodes.size} of {n} are in "
+                             f"no block")
+        _check_block_sizes(blocks, q)
+        return blocks
+    _, inv = np.unique(labels, return_inverse=True)
+    order = np.argsort(inv, kind="stable")
+    bounds = np.cumsum(np.bincount(inv))[:-1]
+    blocks = np.split(order.astype(np.int64), bounds)
+    _check_block_sizes(blocks, q)
+    return blocks
+
+
+def _check_block_sizes(blocks: Sequence[np.ndarray], q: int) -> None:
+    m = max((b.size for b in blocks), default=0)
+    if float(q) ** m > MAX_BLOCK_CONFIGURATIONS:
+        raise ValueError(f"block of {m} nodes with {q} states has {q}^{m} joint states; "
+                         f"block pseudolikelihood enumerates at most "
+                         f"{MAX_BLOCK_CONFIGURATIONS} per block (use smaller blocks)")

@@ -87,6 +87,13 @@ def _distances(args: argparse.Namespace) -> int:
     return 0
 
 
+def _models(args: argparse.Namespace) -> int:
+    from mrfpe.models import registry
+
+    print(registry.table())
+    return 0
+
+
 def _estimate(args: argparse.Namespace) -> int:
     import mrfpe
     from mrfpe.netcdf import check_readable, check_writable
@@ -166,6 +173,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=_samplers)
     s = sub.add_parser("distances", help="list registered distances")
     s.set_defaults(func=_distances)
+    s = sub.add_parser("models", help="list registered models (declared MRFs)")
+    s.set_defaults(func=_models)
 
     e = sub.add_parser("estimate", help="sample a target built from a scene netCDF file")
     e.add_argument("scene", help="scene netCDF file (Scene.save, or scene.nc of mrfpe demo)")

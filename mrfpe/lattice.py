@@ -157,6 +157,19 @@ class Lattice:
         """
         return split_ids(np.arange(self.n_nodes, dtype=np.int64), k, kind, what="n_nodes")
 
+    def codings(self) -> list[np.ndarray]:
+        """Node ids of Besag's codings (1974, Sec. 6.1): the classes ``2 (r % 2) + c % 2``.
+
+        A node's pseudolikelihood term involves the nodes of the pixels around it
+        (its 8-neighbourhood), so these four classes -- no two nodes of one class
+        share a pixel -- are conditionally independent given the rest. (The
+        ``strided`` sub-lattices of :meth:`partition` are codings only by accident
+        of the width.)
+        """
+        r, c = np.divmod(np.arange(self.n_nodes, dtype=np.int64), self.node_shape[1])
+        colour = 2 * (r % 2) + c % 2
+        return [np.flatnonzero(colour == k) for k in range(4) if np.any(colour == k)]
+
 
 #: Sub-lattice split rules accepted by :func:`split_ids` (and every target's ``partition``).
 PARTITION_KINDS = ("strided", "block")

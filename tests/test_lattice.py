@@ -166,7 +166,7 @@ def test_every_partition_uses_split_ids():
         assert all(np.array_equal(a, b) for a, b in zip(lat.partition(3, kind), want,
                                                         strict=True))
         x = gibbs_sample([0.3, 0.0], (3, 4), seed=0)
-        sites = [p.sites for p in get("potts", x).partition(3, kind)]
+        sites = [p.nodes for p in get("potts", x).partition(3, kind)]
         assert all(np.array_equal(a, b) for a, b in zip(sites, split_ids(np.arange(12), 3,
                                                                          kind), strict=True))
         g = CorrelatedGaussian(12)

@@ -335,7 +335,8 @@ class MRF(Model):
         common = {"model": self, "design": design, "x": x, "param_names": names,
                   "bounds": bounds, "estimator": estimator}
         if estimator == "pl":
-            return est.ConditionalTarget(rows=[design.conditional_rows(x)], **common)
+            return est.ConditionalTarget(rows=[design.conditional_rows(x)],
+                                         nodes=np.arange(design.graph.n_nodes), **common)
         if estimator == "coding":
             classes = design.graph.colour_classes()
             k = options["coding"]
@@ -343,6 +344,7 @@ class MRF(Model):
                 raise ValueError(f"coding must be in [0, {len(classes) - 1}] (the graph has "
                                  f"{len(classes)} codings); got {k}")
             return est.ConditionalTarget(rows=[design.conditional_rows(x, classes[k])],
+                                         nodes=classes[k],
                                          cost=classes[k].size / design.graph.n_nodes,
                                          extra={"coding": k, "n_codings": len(classes)},
                                          **common)

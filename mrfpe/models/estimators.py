@@ -22,8 +22,12 @@ from typing import Any
 
 import numpy as np
 
-from mrfpe.models.design import MAX_BLOCK_CONFIGURATIONS, ConditionalRows, Design, \
-    softmax_rows_log_prob
+from mrfpe.models.design import (
+    MAX_BLOCK_CONFIGURATIONS,
+    ConditionalRows,
+    Design,
+    softmax_rows_log_prob,
+)
 from mrfpe.models.graph import Graph
 from mrfpe.targets.base import Target, as_theta_batch
 
@@ -66,9 +70,41 @@ class ModelTarget(Target):
 class ConditionalTarget(ModelTarget):
     """``sum_r w_r log p(alternative_r | blanket_r)`` over distinct conditional rows."""
 
-    def __init__(self, *, rows: Sequence[ConditionalRows], **kwargs: Any) -> None:
+    def __init__(self, *, rows: Sequence[ConditionalRows], nodes: np.ndarray | None = None,
+                 **kwargs: Any) -> None:
         super().__init__(**kwargs)
         self.rows = tuple(rows)
+        #: The nodes whose full conditionals the target sums (pl, coding); None for blocks.
+        self.nodes = None if nodes is None else np.asarray(nodes, dtype=np.int64)
+
+    def partition(self, k: int | None = None, kind: str = "strided") -> list[ConditionalTarget]:
+        """Sub-lattice targets over disjoint node subsets whose log_probs sum to this one's.
+
+        ``kind="coding"``: the graph's colour classes within this target's nodes
+        (Besag's codings; ``k`` must be None or their number); ``"strided"`` /
+        ``"block"``: :func:`mrfpe.lattice.split_ids` over the node ids (thesis
+        5.67, 5.68), which are codings only by accident of the lattice width.
+        """
+        from mrfpe.lattice import split_ids
+
+        if self.nodes is None:
+            raise ValueError("partition needs a target of full conditionals (pl or coding); "
+                             "block pseudolikelihood has no node split")
+        if kind == "coding":
+            colours = self.design.graph.colouring()[self.nodes]
+            groups = [self.nodes[colours == c] for c in np.unique(colours)]
+            if k is not None and k != len(groups):
+                raise ValueError(f"k must be None or {len(groups)} (the number of codings) for "
+                                 f"kind='coding'; got {k!r}")
+        else:
+            groups = split_ids(self.nodes, k, kind, what="the target's nodes")
+        n_total = self.design.graph.n_nodes * self.x.shape[0]
+        return [ConditionalTarget(rows=[self.design.conditional_rows(self.x, g)], nodes=g,
+                                  model=self.model, design=self.design, x=self.x,
+                                  param_names=self.param_names, bounds=self.bounds,
+                                  estimator=self.estimator,
+                                  cost=g.size * self.x.shape[0] / n_total, extra=self._extra)
+                for g in groups]
 
     @property
     def n_rows(self) -> int:
@@ -163,7 +199,7 @@ def make_blocks(graph: Graph, block: Any, q: int) -> list[np.ndarray]:
         if graph.shape is None:
             raise ValueError("block must be a node partition (labels or arrays) on a general "
                              "graph; a tile (bh, bw) needs a lattice")
-        H, W = graph.shape
+        _H, W = graph.shape
         bh, bw = block
         r, c = np.divmod(np.arange(n), W)
         labels = (r // bh) * (-(-W // bw)) + c // bw

@@ -2,7 +2,7 @@
 
 A discrete pairwise MRF on a graph with ``q`` states per node has
 
-    ``log p(x | theta) = sum_i theta . f_i(x_i) + sum_{(i,j)} theta . g_ij(x_i, x_j) - log Z(theta)``
+    ``log p(x | theta) = sum_i theta . f_i(x_i) + sum_(ij) theta . g_ij(x_i, x_j) - log Z``
 
 (thesis 4.3-4.5 with T = 1; Besag 1974 Sec. 4). Each term below contributes a
 few parameters and their *design*: node features ``f_i(a)`` as an array
@@ -43,7 +43,8 @@ from mrfpe.models.graph import Graph
 
 __all__ = ["Coupling", "EdgeCovariate", "Field", "NodeCovariate", "Term"]
 
-_KINDS = ("indicator", "value")
+_NODE_KINDS = ("indicator", "value")
+_PAIR_KINDS = ("indicator", "product")
 
 
 class Term:
@@ -72,9 +73,9 @@ class Term:
         return len(self.params(q, edge_types, covariates))
 
 
-def _check_kind(kind: Any, what: str) -> str:
-    if kind not in _KINDS:
-        raise ValueError(f"{what} kind must be 'indicator' or 'value'; got {kind!r}")
+def _check_kind(kind: Any, what: str, kinds: tuple[str, ...] = _NODE_KINDS) -> str:
+    if kind not in kinds:
+        raise ValueError(f"{what} kind must be {' or '.join(map(repr, kinds))}; got {kind!r}")
     return kind
 
 
@@ -122,8 +123,8 @@ class Field(Term):
 
 
 def _pair_feature(q: int, values: np.ndarray, kind: str) -> np.ndarray:
-    """``(q, q)``: ``[a = b]`` (indicator) or ``v(a) v(b)`` (value)."""
-    if kind == "value":
+    """``(q, q)``: ``[a = b]`` (indicator) or ``v(a) v(b)`` (product)."""
+    if kind == "product":
         v = np.asarray(values, dtype=np.float64)
         return np.outer(v, v)
     return np.eye(q)
@@ -143,7 +144,7 @@ class Coupling(Term):
     name: str = "coupling"
 
     def __post_init__(self) -> None:
-        _check_kind(self.kind, "Coupling")
+        _check_kind(self.kind, "Coupling", _PAIR_KINDS)
         _bounds_pair(self.bounds, "Coupling")
 
     def params(self, q, edge_types, covariates):
@@ -169,7 +170,7 @@ def _node_covariate(covariates: Mapping[str, np.ndarray], name: str) -> np.ndarr
 
 @dataclass(frozen=True)
 class NodeCovariate(Term):
-    """Node covariate ``z_i`` (k features): ``beta_{k,a} z_ik [x_i = a]`` or ``beta_k z_ik v(x_i)``."""
+    """Node covariate ``z_i`` (k features): ``beta_ka z_ik [x_i = a]`` or ``beta_k z_ik v(x_i)``."""
 
     covariate: str
     kind: str = "indicator"
@@ -207,7 +208,8 @@ class NodeCovariate(Term):
 
 @dataclass(frozen=True)
 class EdgeCovariate(Term):
-    """Edge covariate ``w_e`` (k features) scaling a coupling: ``gamma_k w_ek [x_i = x_j]``.
+    """Edge covariate ``w_e`` (k features) scaling a coupling: ``gamma_k w_ek [x_i = x_j]``
+    (or ``gamma_k w_ek v(x_i) v(x_j)`` for ``kind="product"``).
 
     ``values`` is the covariate's name in ``covariates`` (an ``(n_edges,)`` or
     ``(n_edges, k)`` array in ``graph.edges`` order), or a callable
@@ -222,7 +224,7 @@ class EdgeCovariate(Term):
     def __post_init__(self) -> None:
         if not isinstance(self.covariate, str) or not self.covariate.isidentifier():
             raise ValueError(f"EdgeCovariate name must be an identifier; got {self.covariate!r}")
-        _check_kind(self.kind, "EdgeCovariate")
+        _check_kind(self.kind, "EdgeCovariate", _PAIR_KINDS)
         _bounds_pair(self.bounds, "EdgeCovariate")
         if self.values is not None and not callable(self.values):
             raise ValueError("EdgeCovariate values must be a callable (graph, covariates) -> "

@@ -291,6 +291,16 @@ class BRDFTarget(Target):
                            what="the target's nodes")
         return [self._subset(g) for g in groups]
 
+    def codings(self) -> list[BRDFTarget]:
+        """Sub-targets over Besag's codings of this target's nodes (:meth:`Lattice.codings`).
+
+        Their log_probs sum to this one's; each is a coding likelihood.
+        """
+        local = {int(g): i for i, g in enumerate(self.nodes)}
+        parts = [np.array([local[int(g)] for g in cls if int(g) in local], dtype=np.int64)
+                 for cls in self.scene.lattice.codings()]
+        return [self._subset(p) for p in parts if p.size]
+
     def _subset(self, local: np.ndarray) -> BRDFTarget:
         sub = object.__new__(type(self))
         sub.__dict__.update({k: v for k, v in self.__dict__.items() if not k.startswith("_")})

@@ -24,8 +24,12 @@ infinite square lattice, ``log(1 + sqrt 2)/2 = 0.4407`` in spins, is
   ``(n_i(.), x_i)``, so the target keeps the distinct rows and their counts:
   its cost does not grow with the lattice.
 * :class:`PottsExactLikelihood`: the exact log-likelihood, with ``log Z``
-  by enumerating all ``q^(HW)`` configurations (tiny lattices only), grouped
-  by their sufficient statistics.
+  by enumeration or variable elimination (narrow lattices).
+
+Both are the short forms (``mrfpe.targets.get("potts", x)``) of the declared
+model ``mrfpe.models.potts(q, 4)``'s ``"pl"`` and ``"exact"`` estimators; the
+model also offers codings, block pseudolikelihood, other neighbourhoods and
+covariates (:mod:`mrfpe.models`).
 * :func:`gibbs_sample`: configurations drawn at known parameters by
   checkerboard Gibbs sweeps, reproducible from ``seed``.
 
@@ -39,8 +43,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from mrfpe.lattice import split_ids
-from mrfpe.targets.base import Target, as_theta_batch
+from mrfpe.models.estimators import ConditionalTarget, ExactTarget
 from mrfpe.targets.options import Option, optional
 from mrfpe.validation import check_seed
 
@@ -52,10 +55,6 @@ __all__ = [
     "param_names",
     "sufficient_statistics",
 ]
-
-#: Largest number of configurations :class:`PottsExactLikelihood` enumerates.
-MAX_CONFIGURATIONS = 1 << 22
-
 
 def param_names(n_states: int) -> tuple[str, ...]:
     """Parameter names of the q-state model."""
@@ -149,14 +148,25 @@ def sufficient_statistics(x: Any, n_states: int) -> np.ndarray:
     return np.stack([sj, *sa], axis=1).astype(np.float64)
 
 
-def _logsumexp(a: np.ndarray, axis: int) -> np.ndarray:
-    m = np.max(a, axis=axis, keepdims=True)
-    m = np.where(np.isfinite(m), m, 0.0)
-    return np.squeeze(m, axis=axis) + np.log(np.sum(np.exp(a - m), axis=axis))
+def _model_target(self: Any, estimator: str, configurations: Any, n_states: int | None,
+                  bounds: Any, **options: Any) -> None:
+    """Build ``self`` as the 4-neighbour Potts model's ``estimator`` target (the model door)."""
+    from mrfpe.models.library import potts
+
+    x, q = _configs(configurations, n_states)
+    built = potts(q, 4).target(estimator, x if x.shape[0] > 1 else x[0],
+                               bounds=_bounds(bounds, q), **options)
+    vars(self).update(vars(built))
+    self.name = type(self).name
+    self.n_states = q
+    self.configurations = x
 
 
-class PottsPseudoLikelihood(Target):
+class PottsPseudoLikelihood(ConditionalTarget):
     """Pseudolikelihood of observed Potts/Ising configurations (4.23-4.24).
+
+    The short form of ``mrfpe.models.potts(q, 4).target("pl", x)``: the same
+    distinct-row evaluation (:mod:`mrfpe.models.design`).
 
     Parameters
     ----------
@@ -178,70 +188,14 @@ class PottsPseudoLikelihood(Target):
 
     def __init__(self, configurations: Any, n_states: int | None = None,
                  bounds: Any = None) -> None:
-        x, q = _configs(configurations, n_states)
-        self.n_states = q
-        self.param_names = param_names(q)
-        self.bounds = _bounds(bounds, q)
-        self.configurations = x
-        _, H, W = x.shape
-        self._n_total = H * W
-        self._set_sites(np.arange(H * W))
-
-    def _set_sites(self, sites: np.ndarray) -> None:
-        """Keep the distinct (n_i(.), x_i) rows of ``sites`` and their counts."""
-        x, q = self.configurations, self.n_states
-        M, H, W = x.shape
-        counts = neighbour_counts(x, q).reshape(M, H * W, q)
-        states = x.reshape(M, H * W)
-        self.sites = np.asarray(sites, dtype=np.int64)
-        self.cost = self.sites.shape[0] / self._n_total
-        rows = np.concatenate([counts[:, self.sites].reshape(-1, q),
-                               states[:, self.sites].reshape(-1, 1)], axis=1)
-        if rows.shape[0]:
-            self._rows, self._weight = np.unique(rows, axis=0, return_counts=True)
-        else:
-            self._rows, self._weight = np.zeros((0, q + 1), dtype=np.int64), np.zeros(0, int)
-
-    def _row_bytes(self) -> float:
-        return 8.0 * 4 * self._rows.shape[0] * self.n_states
-
-    def _log_prob(self, theta: np.ndarray) -> np.ndarray:
-        if self._rows.shape[0] == 0:
-            return np.zeros(theta.shape[0])
-        q = self.n_states
-        J = theta[:, :1, None]  # (N, 1, 1)
-        h = np.concatenate([np.zeros((theta.shape[0], 1)), theta[:, 1:]], axis=1)[:, None, :]
-        n = self._rows[None, :, :q].astype(np.float64)
-        e = J * n + h  # (N, R, q): log of the unnormalised conditional
-        own = np.take_along_axis(e, np.broadcast_to(self._rows[None, :, q:], (e.shape[0],
-                                                    e.shape[1], 1)), axis=2)[..., 0]
-        return (self._weight[None] * (own - _logsumexp(e, axis=2))).sum(axis=1)
-
-    def partition(self, k: int, kind: str = "strided") -> list[PottsPseudoLikelihood]:
-        """Sub-lattice PLs over disjoint site subsets (5.67, 5.68) that sum to this one."""
-        groups = split_ids(self.sites, k, kind, what="n_sites")
-        parts = []
-        for g in groups:
-            part = object.__new__(type(self))
-            part.__dict__.update({k: self.__dict__[k] for k in (
-                "n_states", "param_names", "bounds", "configurations", "_n_total")})
-            part._set_sites(g)
-            parts.append(part)
-        return parts
-
-    def describe(self) -> dict:
-        M, H, W = self.configurations.shape
-        return {"name": self.name, "class": type(self).__name__,
-                "param_names": list(self.param_names), "bounds": self.bounds.tolist(),
-                "n_states": self.n_states, "shape": [H, W], "n_configurations": M,
-                "n_sites": int(self.sites.shape[0]), "cost": float(self.cost)}
+        _model_target(self, "pl", configurations, n_states, bounds)
 
 
-class PottsExactLikelihood(Target):
-    """Exact log-likelihood ``sum_m log p(x_m | theta)`` with ``Z`` by enumeration.
+class PottsExactLikelihood(ExactTarget):
+    """Exact log-likelihood ``sum_m log p(x_m | theta)``, ``log Z`` by enumeration or elimination.
 
-    Only for tiny lattices: ``q^(H W)`` must not exceed :data:`MAX_CONFIGURATIONS`.
-    Parameters as :class:`PottsPseudoLikelihood`.
+    The short form of ``mrfpe.models.potts(q, 4).target("exact", x)``
+    (:mod:`mrfpe.models.exact`). Parameters as :class:`PottsPseudoLikelihood`.
     """
 
     name = "potts_exact"
@@ -250,45 +204,7 @@ class PottsExactLikelihood(Target):
 
     def __init__(self, configurations: Any, n_states: int | None = None,
                  bounds: Any = None) -> None:
-        x, q = _configs(configurations, n_states)
-        M, H, W = x.shape
-        if float(q) ** (H * W) > MAX_CONFIGURATIONS:
-            raise ValueError(f"configurations of shape ({H}, {W}) with {q} states have "
-                             f"{q}^{H * W} configurations; exact enumeration is limited to "
-                             f"{MAX_CONFIGURATIONS}")
-        self.n_states = q
-        self.param_names = param_names(q)
-        self.bounds = _bounds(bounds, q)
-        self.configurations = x
-        self._stats_obs = sufficient_statistics(x, q).sum(axis=0)  # (q,)
-        self._n_obs = M
-        # All configurations, as base-q digits, grouped by their sufficient statistics.
-        n = H * W
-        stats = []
-        codes = np.arange(q ** n, dtype=np.int64)
-        for a in range(0, codes.shape[0], 1 << 16):
-            c = codes[a:a + (1 << 16)]
-            digits = (c[:, None] // (q ** np.arange(n, dtype=np.int64))[None, :]) % q
-            stats.append(sufficient_statistics(digits.reshape(-1, H, W), q))
-        self._stats, self._mult = np.unique(np.concatenate(stats), axis=0, return_counts=True)
-
-    def log_partition(self, theta: Any) -> np.ndarray:
-        """``log Z(theta)`` (N,) by enumeration."""
-        theta = as_theta_batch(theta, self.ndim)
-        e = theta @ self._stats.T + np.log(self._mult)[None, :]
-        return _logsumexp(e, axis=1)
-
-    def _row_bytes(self) -> float:
-        return 8.0 * 3 * self._stats.shape[0]
-
-    def _log_prob(self, theta: np.ndarray) -> np.ndarray:
-        return theta @ self._stats_obs - self._n_obs * self.log_partition(theta)
-
-    def describe(self) -> dict:
-        M, H, W = self.configurations.shape
-        return {"name": self.name, "class": type(self).__name__,
-                "param_names": list(self.param_names), "bounds": self.bounds.tolist(),
-                "n_states": self.n_states, "shape": [H, W], "n_configurations": M}
+        _model_target(self, "exact", configurations, n_states, bounds)
 
 
 def gibbs_sample(theta: Any, shape: tuple[int, int], n_states: int = 2, *, n_samples: int = 1,

@@ -3,13 +3,15 @@
 - :mod:`mrfpe.testing.samplers`: :func:`check_sampler`, :func:`run_check` and the checks;
 - :mod:`mrfpe.testing.accuracy`: the two checks no declaration can skip or loosen
   (:func:`check_gaussian_moments` with ESS-derived tolerances, :func:`check_diagnostics`);
-- :mod:`mrfpe.testing.targets`: the analytic targets they run on.
+- :mod:`mrfpe.testing.targets`: the analytic targets they run on;
+- :mod:`mrfpe.testing.model_checks`: :func:`check_model` for declared models.
 
 Everything is re-exported here, so ``from mrfpe.testing import check_sampler`` works.
 """
 
 from __future__ import annotations
 
+from mrfpe.testing.model_checks import check_model
 from mrfpe.testing.samplers import (
     CHECKS,
     check_bounds,
@@ -50,6 +52,7 @@ __all__ = [
     "check_gaussian_moments",
     "check_interface",
     "check_map_trace",
+    "check_model",
     "check_mostly_minus_inf",
     "check_netcdf_roundtrip",
     "check_reproducible",

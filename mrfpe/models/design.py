@@ -118,10 +118,14 @@ class Design:
     pair : (n_edge_types or n_edges, q, q, P)
     psi : callable (N, d) -> (N, P)
         The feature map; ``None`` for the identity (log-linear models).
+    pair_per_edge : bool
+        ``pair`` has one row per edge (edge covariates) rather than per edge type;
+        said explicitly, since the two lengths can coincide.
     """
 
     def __init__(self, graph: Graph, n_states: int, node: np.ndarray, pair: np.ndarray,
-                 psi: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
+                 psi: Callable[[np.ndarray], np.ndarray] | None = None, *,
+                 pair_per_edge: bool = False) -> None:
         self.graph = graph
         self.q = int(n_states)
         node = np.ascontiguousarray(node, dtype=np.float64)
@@ -129,10 +133,11 @@ class Design:
         if node.ndim != 3 or node.shape[0] not in (1, graph.n_nodes) or node.shape[1] != self.q:
             raise ValueError(f"node design must be (1 or {graph.n_nodes}, {self.q}, P); got "
                              f"{node.shape}")
-        if (pair.ndim != 4 or pair.shape[0] not in (graph.n_edge_types, graph.n_edges)
+        rows = graph.n_edges if pair_per_edge else graph.n_edge_types
+        if (pair.ndim != 4 or pair.shape[0] != rows
                 or pair.shape[1:3] != (self.q, self.q) or pair.shape[3] != node.shape[2]):
-            raise ValueError(f"pair design must be ({graph.n_edge_types} or {graph.n_edges}, "
-                             f"{self.q}, {self.q}, {node.shape[2]}); got {pair.shape}")
+            raise ValueError(f"pair design must be ({rows}, {self.q}, {self.q}, "
+                             f"{node.shape[2]}); got {pair.shape}")
         if not np.allclose(pair, pair.transpose(0, 2, 1, 3)):
             raise ValueError("pair features must be symmetric in the two states (an undirected "
                              "edge has no order)")
@@ -140,8 +145,7 @@ class Design:
             a.setflags(write=False)
         self.node, self.pair = node, pair
         self.node_shared = node.shape[0] == 1 and graph.n_nodes > 1
-        self.pair_per_edge = pair.shape[0] == graph.n_edges and not (
-            pair.shape[0] == graph.n_edge_types)
+        self.pair_per_edge = bool(pair_per_edge)
         self._psi = psi
 
     @property

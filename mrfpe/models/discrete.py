@@ -29,12 +29,15 @@ import numpy as np
 from mrfpe.models.base import Model
 from mrfpe.models.design import Design, check_configurations
 from mrfpe.models.graph import Graph, LatticeSpec, as_graph_spec
-from mrfpe.models.terms import Term
+from mrfpe.models.terms import EdgeCovariate, Term
 from mrfpe.targets.base import Target
 from mrfpe.targets.options import Option, choice_check, optional
 from mrfpe.validation import check_positive_int
 
-__all__ = ["MRF", "Potential"]
+__all__ = ["FORBIDDEN", "MRF", "Potential"]
+
+#: The log potential that stands for -inf (a forbidden state) in a general Potential.
+FORBIDDEN = -1e300
 
 
 @dataclass(frozen=True)
@@ -248,8 +251,6 @@ class MRF(Model):
                 getattr(t, "values", None) is not None for t in self.terms):
             raise ValueError(f"covariates {', '.join(map(repr, extra))} are not used by any term; "
                              f"used: {', '.join(map(repr, needed)) or 'none'}")
-        from mrfpe.models.terms import EdgeCovariate
-
         edge_names = {t.covariate for t in self.terms or () if isinstance(t, EdgeCovariate)}
         out = {}
         for name, value in covariates.items():
@@ -299,11 +300,12 @@ class MRF(Model):
                          else np.asarray(pd, dtype=float))
         n_rows = max(a.shape[0] for a in nodes)
         node = np.concatenate([np.broadcast_to(a, (n_rows, *a.shape[1:])) for a in nodes], -1)
-        if any(a.shape[0] == g.n_edges and a.shape[0] != g.n_edge_types for a in pairs):
-            pairs = [a if a.shape[0] == g.n_edges and g.n_edges != g.n_edge_types
-                     else a[g.edge_type] for a in pairs]
+        per_edge = [isinstance(t, EdgeCovariate) for t in self.terms]
+        if any(per_edge):  # one pair row per edge: expand the per-type rows of other terms
+            pairs = [a if e else a[g.edge_type] for a, e in zip(pairs, per_edge, strict=True)]
         pair = np.concatenate(pairs, axis=-1)
-        return (Design(g, q, node, pair), tuple(n for n, _ in params),
+        return (Design(g, q, node, pair, pair_per_edge=any(per_edge)),
+                tuple(n for n, _ in params),
                 np.array([b for _, b in params], dtype=np.float64))
 
     def _data(self, data: Any, options: Mapping[str, Any]
@@ -436,7 +438,9 @@ def _potential_design(pot: Potential, g: Graph, q: int) -> Design:
         finite = np.isfinite(pt)
         if not np.allclose(np.where(finite, pt, 0), np.where(finite, pt, 0).swapaxes(2, 3)):
             raise ValueError("Potential pair must return tables symmetric in the two states")
-        return np.concatenate([nt, pt.reshape(n, -1)], axis=1)
+        # a forbidden state or pair (-inf) becomes -1e300: exp() of it is 0 all the same,
+        # and the indicator design's zeros times it stay 0 (0 * -inf would be NaN)
+        return np.maximum(np.concatenate([nt, pt.reshape(n, -1)], axis=1), FORBIDDEN)
 
     # symmetrised indicators: pair[t, a, b] . psi = (T_ab + T_ba) / 2 = T_ab for symmetric tables
     return Design(g, q, node, 0.5 * (pair + pair.transpose(0, 2, 1, 3)), psi)

@@ -132,6 +132,9 @@ class ExactTarget(ModelTarget):
         self._stats = self.design.statistics(self.x).sum(axis=0)
         self.method = self._log_z.method
 
+    def _row_bytes(self) -> float:
+        return float(getattr(self._log_z, "_row_bytes", 0.0))
+
     def log_partition(self, theta: Any) -> np.ndarray:
         """``log Z(theta)`` (N,)."""
         theta = as_theta_batch(theta, self.ndim)
@@ -174,16 +177,29 @@ class LikelihoodTarget(ModelTarget):
         return self.design.psi(theta) @ self._stats
 
     def simulate(self, theta: Any, n: int | None = None, *, seed: Any = None,
-                 init: Any = "random", n_sweeps: int | None = None) -> np.ndarray:
-        """``n`` configurations (default as many as observed) at ``theta``: (n, n_nodes)."""
+                 init: Any = "random", n_sweeps: int | None = None,
+                 thin: int = 10) -> np.ndarray:
+        """Configurations at ``theta``: (n, n_nodes).
+
+        ``init="data"`` runs one chain from each observed configuration and
+        returns their final states (``n`` = the number observed): the auxiliary
+        draws of the exchange algorithm. Otherwise ``n`` (default as many as
+        observed) draws of one chain, ``thin`` sweeps apart, after ``n_sweeps``.
+        """
         from mrfpe.models.simulate import simulate
 
         th = as_theta_batch(theta, self.ndim)
         if th.shape[0] != 1:
             raise ValueError(f"theta must be one parameter vector; got {th.shape[0]}")
-        return simulate(self.design, self.design.psi(th)[0], n=self.n_observations if n is None
-                        else n, seed=seed, method=self.sampler,
-                        n_sweeps=self.n_sweeps if n_sweeps is None else n_sweeps, init=init)
+        psi = self.design.psi(th)[0]
+        sweeps = self.n_sweeps if n_sweeps is None else n_sweeps
+        if isinstance(init, str) and init == "data":
+            rng = np.random.default_rng(seed)
+            return np.concatenate([
+                simulate(self.design, psi, 1, seed=int(rng.integers(2**63)), method=self.sampler,
+                         n_sweeps=sweeps, init=xm) for xm in self.x])
+        return simulate(self.design, psi, n=self.n_observations if n is None else n, seed=seed,
+                        method=self.sampler, n_sweeps=sweeps, thin=thin, init=init)
 
 
 def make_blocks(graph: Graph, block: Any, q: int) -> list[np.ndarray]:

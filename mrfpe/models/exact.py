@@ -16,9 +16,11 @@ Methods
     then ``O(N U P)`` per call for ``U`` distinct statistics.
 ``"eliminate"``
     Variable (bucket) elimination (Koller & Friedman 2009, ch. 9), batched over
-    the rows of ``psi`` and in log space: factors are arrays ``(N, q, ..., q)``
-    whose axes follow the elimination order, combined by broadcasting sums and
-    summed out by max-shifted logsumexp. The order is fixed at construction. On a
+    the rows of ``psi`` and in log space: factors are arrays ``(q, ..., q, N)``
+    (one axis per node, the batch axis last so that numpy's inner loops are
+    long), combined by broadcasting sums and summed out by max-shifted
+    logsumexp. The order, the scopes and every factor's broadcast plan are fixed
+    at construction; a call only runs the numeric passes. On a
     lattice ``(H, W)`` it is the row-major sweep across the shorter side (the
     cheaper of the two sweeps), so the factor carried from site to site is the
     *frontier* of ``min(H, W)`` sites (one more with the diagonals of the
@@ -38,9 +40,10 @@ Methods
     elimination's total factor entries, else elimination within its limit, else a
     ValueError giving both sizes.
 
-Feasible, for instance: a 10 x 10 Ising model (``w = 10``, ``2^11`` entries), a
-4 x 30 Potts model with ``q = 3`` (``3^5``), an 8-neighbour 20 x 20 Ising model
-(``2^22``, the limit). A 64 x 64 lattice is refused (``2^65``).
+Feasible, for instance: a 10 x 10 Ising model (``w = 10``, ``2^11`` entries;
+about 0.6 ms per psi row), a 4 x 30 Potts model with ``q = 3`` (``3^5``), an
+8-neighbour 20 x 20 Ising model (``2^22``, the limit). A 64 x 64 lattice is
+refused (``2^65``).
 """
 
 from __future__ import annotations
@@ -64,7 +67,7 @@ MAX_ENUMERATION = 1 << 20
 #: Largest intermediate factor of variable elimination, in entries per psi row.
 MAX_FACTOR_ENTRIES = 1 << 22
 #: Symbolic work (scope sizes summed) after which planning stops an order already over the limit.
-_PLAN_WORK = 2_000_000
+_PLAN_WORK = 500_000
 _HINT = ("use a smaller (narrower) lattice or graph, enumeration for tiny graphs, or the "
          "pseudolikelihood estimators 'pl' / 'block'")
 
@@ -77,17 +80,18 @@ def _power(q: int, k: int) -> str:
 
 @dataclass
 class _Schedule:
-    """A symbolic elimination: per step its input factor ids and its scope.
+    """A symbolic elimination: per step its input factor ids, its scope and ``vi``.
 
-    ``axes[f]`` are the node ids along factor ``f``'s axes (terms first, then the
-    intermediate factors in order of creation); a step's scope lists its nodes
-    in elimination order, so the eliminated node is its first axis.
+    ``axes[f]``: the nodes along factor ``f``'s axes (terms, then intermediates in
+    order of creation). A scope keeps its largest input's axis order, with the nodes
+    it lacks inserted after the eliminated node ``scope[vi]``: on a lattice a new site
+    takes the frontier slot of the site it replaces, so other axes stay in long blocks.
     """
 
     name: str
     order: np.ndarray
     axes: list[tuple[int, ...]]
-    steps: list[tuple[list[int], tuple[int, ...]]]
+    steps: list[tuple[list[int], tuple[int, ...], int]]
     width: int  # largest scope - 1: the induced width (a lower bound if not complete)
     complete: bool
     total: int  # sum over steps of q^|scope|
@@ -108,30 +112,35 @@ def _schedule(q: int, terms: list[tuple[int, ...]], order: np.ndarray, name: str
     buckets: list[list[int]] = [[] for _ in order]
     for f, ax in enumerate(axes):
         buckets[min(map(key, ax))].append(f)
-    steps: list[tuple[list[int], tuple[int, ...]]] = []
+    steps: list[tuple[list[int], tuple[int, ...], int]] = []
     widest = total = live = peak = work = 0
-    for s in range(len(order)):
+    for s, v in enumerate(order.tolist()):
         ins = buckets[s]
-        scope = tuple(sorted(set().union(*(axes[f] for f in ins)), key=key))
+        base = max((axes[f] for f in ins), key=len)
+        vi = base.index(v) + 1
+        extra = sorted(set().union(*(axes[f] for f in ins)) - set(base), key=key)
+        scope = (*base[:vi], *extra, *base[vi:])
+        vi -= 1
         k = len(scope)
         widest, work = max(widest, k), work + k
-        if widest > kmax and work > _PLAN_WORK:
+        if widest > kmax and work > _PLAN_WORK:  # hopeless: stop (the width is a lower bound)
             return _Schedule(name, order, axes, steps, widest - 1, False, total, peak)
         size = q ** k
         peak = max(peak, live + 3 * size)  # inputs alive, the sum and its exp
         live -= sum(q ** len(axes[f]) for f in ins if f >= len(terms))
         total += size
         if k > 1:
-            buckets[key(scope[1])].append(len(axes))
-            axes.append(scope[1:])
+            rest = scope[:vi] + scope[vi + 1:]
+            buckets[min(map(key, rest))].append(len(axes))
+            axes.append(rest)
             live += size // q
-        steps.append((ins, scope))
+        steps.append((ins, scope, vi))
     return _Schedule(name, order, axes, steps, widest - 1, True, total, peak)
 
 
 def _min_fill(graph: Graph, kmax: int) -> np.ndarray | int:
     """Greedy min-fill order (ties: min degree), or the degree at which it gave up."""
-    adj: list[set[int]] = [set() for _ in range(graph.n_nodes)]
+    adj: list[set[int]] = [set() for _ in range(graph.n_nodes)]  # the induced graph so far
     for i, j in graph.edges.tolist():
         adj[i].add(j)
         adj[j].add(i)
@@ -157,7 +166,7 @@ def _min_fill(graph: Graph, kmax: int) -> np.ndarray | int:
         nb = adj[u]
         for a in nb:
             adj[a].discard(u)
-        touched = set(nb)
+        touched = set(nb)  # whose fill may change: u's neighbours, common ones of a new edge
         for a, b in combinations(nb, 2):
             if b not in adj[a]:
                 adj[a].add(b)
@@ -175,14 +184,14 @@ def _best_schedule(graph: Graph, q: int, terms: list[tuple[int, ...]], kmax: int
     if graph.shape is not None and math.prod(graph.shape) == n:
         H, W = graph.shape
         grid = np.arange(n, dtype=np.int64).reshape(H, W)
-        cands = [_schedule(q, terms, grid.ravel(), f"row-major sweep, frontier of {W}", kmax),
-                 _schedule(q, terms, grid.T.ravel(), f"column-major sweep, frontier of {H}",
+        cands = [_schedule(q, terms, grid.ravel(), f"row-major sweep, rows of {W}", kmax),
+                 _schedule(q, terms, grid.T.ravel(), f"column-major sweep, columns of {H}",
                            kmax)]
         return min(cands, key=lambda s: (not s.complete, s.width, s.total))
     order = _min_fill(graph, kmax)
     if isinstance(order, int):
-        return _Schedule("greedy min-fill order", np.zeros(0, np.int64), [], [], order, False,
-                         0, 0)
+        return _Schedule("greedy min-fill order", order=np.zeros(0, np.int64), axes=[],
+                         steps=[], width=order, complete=False, total=0, peak=0)
     return _schedule(q, terms, order, "greedy min-fill order", kmax)
 
 
@@ -193,7 +202,6 @@ class LogPartition:
     ----------
     design : Design
     method : {"auto", "enumerate", "eliminate"}
-        See the module docstring.
 
     Attributes
     ----------
@@ -204,15 +212,17 @@ class LogPartition:
         ``max_factor_entries`` the largest factor's entries per psi row.
     """
 
+    order: np.ndarray | None
+    width: int | None
+    max_factor_entries: int | None
+
     def __init__(self, design: Design, method: str = "auto") -> None:
         if method not in ("auto", "enumerate", "eliminate"):
             raise ValueError(f"method must be 'auto', 'enumerate' or 'eliminate'; got {method!r}")
         self.design = design
         g, q = design.graph, design.q
         n, size = g.n_nodes, q ** g.n_nodes
-        self.order: np.ndarray | None = None
-        self.width: int | None = None
-        self.max_factor_entries: int | None = None
+        self.order, self.width, self.max_factor_entries = None, None, None
         sched = None
         if method != "enumerate":
             kmax = math.floor(math.log(MAX_FACTOR_ENTRIES) / math.log(q) + 1e-9)
@@ -224,9 +234,8 @@ class LogPartition:
             elif ok:
                 method = "eliminate"
             else:
-                more = "" if sched.complete else " or more"
                 factor = (f"{_power(q, sched.width + 1)} entries per psi row (induced width "
-                          f"{sched.width}{more}, {sched.name})")
+                          f"{sched.width}{'' if sched.complete else ' or more'}, {sched.name})")
                 limit = f"MAX_FACTOR_ENTRIES = {MAX_FACTOR_ENTRIES} = {q}^{kmax}"
                 if method == "auto":
                     raise ValueError(
@@ -237,10 +246,9 @@ class LogPartition:
                 raise ValueError(f"exact log Z by variable elimination on {n} nodes with {q} "
                                  f"states needs a factor of {factor}, over {limit}; {_HINT}")
         self.method = method
-        if method == "enumerate":
+        if method == "enumerate" or sched is None:
             self._init_enumerate(size)
         else:
-            assert sched is not None
             self._init_eliminate(sched)
 
     def _init_enumerate(self, size: int) -> None:
@@ -259,32 +267,32 @@ class LogPartition:
 
     def _init_eliminate(self, sched: _Schedule) -> None:
         """Fix everything but the numbers: term sources and each factor's broadcast plan."""
-        d, g = self.design, self.design.graph
-        n = g.n_nodes
+        d, g, n = self.design, self.design.graph, self.design.graph.n_nodes
         self.order, self.width = sched.order, sched.width
         self.max_factor_entries = sched.entries(d.q)
         node_rows = np.arange(n) if d.node.shape[0] == n else np.zeros(n, np.int64)
         pair_rows = np.arange(g.n_edges) if d.pair_per_edge else g.edge_type
         self._rows = [int(r) for r in np.concatenate([node_rows, pair_rows])]
         self._n_terms = len(self._rows)
-        self._plan: list[tuple[list[tuple[int, tuple[int, ...] | None, tuple[int, ...]]], int]]
-        self._plan = []
+        # per step: inputs (id, None or (full shape, transpose), broadcast shape), the axis
+        # summed out and the id of the new factor (-1: a constant, added to log Z)
+        self._plan: list[tuple[list[tuple[int, tuple | None, tuple[int, ...]]], int, int]] = []
         new = self._n_terms
-        for ins, scope in sched.steps:
+        for ins, scope, vi in sched.steps:
             ins = sorted(ins, key=lambda f: len(sched.axes[f]))  # small factors first
             have = [[v in sched.axes[f] for v in scope] for f in ins]
-            # merge consecutive scope axes that every input has or lacks alike (not axis 0,
-            # the eliminated node), so that numpy loops over few long axes
-            cuts = [0, *(k for k in range(1, len(scope))
-                         if k == 1 or any(h[k] != h[k - 1] for h in have)), len(scope)]
+            # merge consecutive scope axes that every input has or lacks alike (never the
+            # eliminated node's), so that numpy loops over few long axes
+            cuts = [0, *(k for k in range(1, len(scope)) if k in (vi, vi + 1)
+                         or any(h[k] != h[k - 1] for h in have)), len(scope)]
             parts = []
             for f, h in zip(ins, have):
                 src = sched.axes[f]
                 perm = sorted(range(len(src)), key=lambda a: scope.index(src[a]))
-                tr = None if perm == sorted(perm) else (0, *(1 + a for a in perm))
+                tr = None if perm == sorted(perm) else ((d.q,) * len(src), (*perm, len(perm)))
                 shape = tuple(d.q ** (b - a) if h[a] else 1 for a, b in pairwise(cuts))
                 parts.append((f, tr, shape))
-            self._plan.append((parts, new if len(scope) > 1 else -1))
+            self._plan.append((parts, cuts.index(vi), new if len(scope) > 1 else -1))
             new += len(scope) > 1
         table = d.node.shape[0] * d.q + d.pair.shape[0] * d.q * d.q
         self._row_bytes = 8.0 * (sched.peak + table + 1)
@@ -294,8 +302,7 @@ class LogPartition:
     def __call__(self, psi: np.ndarray) -> np.ndarray:
         """``log Z`` (N,) at each row of ``psi`` (N, P)."""
         psi = np.atleast_2d(np.asarray(psi, dtype=np.float64))
-        N = psi.shape[0]
-        out = np.empty(N)
+        out = np.empty(N := psi.shape[0])
         if self.method == "enumerate":
             for sl in chunk_rows(N, 16.0 * self._stats.shape[0], minimum=1):
                 out[sl] = logsumexp(psi[sl] @ self._stats.T + self._log_mult[None, :], axis=1)
@@ -308,25 +315,33 @@ class LogPartition:
         return out
 
     def _eliminate(self, psi: np.ndarray) -> np.ndarray:
-        """One numeric pass of the planned elimination over a chunk of psi rows."""
+        """One numeric pass of the planned elimination over a chunk of psi rows.
+
+        Factors are ``(q, ..., q, N)`` arrays: the batch axis is *last*, so that
+        numpy's inner loops run over it (contiguous) rather than over size-``q``
+        state axes, and a step is a few broadcast passes with long inner loops.
+        """
         node, pair = self.design.tables(psi)  # (N, n|1, q), (N, T|E, q, q)
-        n, nt, rows = self.design.graph.n_nodes, self._n_terms, self._rows
+        node = np.ascontiguousarray(np.moveaxis(node, 0, -1))  # (n|1, q, N)
+        pair = np.ascontiguousarray(np.moveaxis(pair, 0, -1))  # (T|E, q, q, N)
+        n, nt, rows, N = self.design.graph.n_nodes, self._n_terms, self._rows, psi.shape[0]
         vals: dict[int, np.ndarray] = {}
-        N = psi.shape[0]
         total = np.zeros(N)
-        for parts, new in self._plan:
+        for parts, ax, new in self._plan:
             acc = None
             for f, tr, shape in parts:
-                a = vals.pop(f) if f >= nt else (node[:, rows[f]] if f < n else pair[:, rows[f]])
-                if tr is not None:
-                    a = a.transpose(tr)
-                a = a.reshape((N, *shape))
+                a = vals.pop(f) if f >= nt else (node[rows[f]] if f < n else pair[rows[f]])
+                if tr is not None:  # intermediates are stored with merged axes
+                    a = a.reshape((*tr[0], N)).transpose(tr[1])
+                a = a.reshape((*shape, N))
                 acc = a if acc is None else acc + a
             assert acc is not None
-            m = acc.max(axis=1, keepdims=True)  # the eliminated node is axis 1
+            m = acc.max(axis=ax, keepdims=True)  # ax: the eliminated node's axis
             m[~np.isfinite(m)] = 0.0
+            x = np.subtract(acc, m, out=acc if len(parts) > 1 else None)  # acc is ours if a sum
+            lse = np.exp(x, out=x).sum(axis=ax)
             with np.errstate(divide="ignore"):
-                lse = np.log(np.exp(acc - m).sum(axis=1)) + m[:, 0]
+                lse = np.log(lse, out=lse) + m.squeeze(ax)
             if new < 0:
                 total += lse
             else:

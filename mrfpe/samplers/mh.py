@@ -26,6 +26,7 @@ import numpy as np
 
 from mrfpe.samplers.base import Callback, Sampler, check_positive_int, check_range
 from mrfpe.samplers.kit import (
+    AdaptiveRandomWalk,
     KeptStates,
     Run,
     check_bool,
@@ -33,23 +34,10 @@ from mrfpe.samplers.kit import (
     check_seed,
     check_target,
     draw_in_support,
+    metropolis_accept,
 )
 
-__all__ = ["MetropolisHastings", "metropolis_accept"]
-
-
-def metropolis_accept(log_u: np.ndarray, lp_current: np.ndarray,
-                      lp_proposed: np.ndarray) -> np.ndarray:
-    """Accept mask of the Metropolis rule log u < log p(θ') − log p(θ_i) (5.44, 5.45).
-
-    A chain whose current state has zero density (possible only before it has
-    found the support) accepts every proposal, so it can walk into the support;
-    a proposal of zero density is never accepted from a state inside it.
-    """
-    stuck = ~np.isfinite(lp_current)
-    with np.errstate(invalid="ignore"):
-        ratio = np.where(stuck, np.inf, lp_proposed - np.where(stuck, 0.0, lp_current))
-    return stuck | (log_u < ratio)
+__all__ = ["MetropolisHastings", "metropolis_accept"]  # the accept rule lives in the kit
 
 
 class MetropolisHastings(Sampler):
@@ -96,19 +84,16 @@ class MetropolisHastings(Sampler):
         check_seed(seed)
         rng = np.random.default_rng(seed)
         n, c, d = self.n_steps, self.n_chains, bounds.shape[0]
-        lo, hi = bounds[:, 0], bounds[:, 1]
         run = Run(target, n, progress=progress, callback=callback, desc=self.name)
 
         x, lp = draw_in_support(run, target, rng, c, bounds)
-        chol = np.diag(self.proposal_sd * (hi - lo))
-        log_scale, shaped = 0.0, False
+        walk = AdaptiveRandomWalk(bounds, c, self.proposal_sd, self.burn_in, self.adapt,
+                                  self.target_acceptance)
         acceptance, scales = np.zeros(n), np.zeros(n)
         kept = KeptStates(n, self.burn_in, self.thin, c, d)
-        burn = np.empty((self.burn_in, c, d)) if self.adapt else None
         for t in range(n):
-            scale = np.exp(log_scale)
-            y = x + scale * rng.standard_normal((c, d)) @ chol.T
-            inside = np.all((y >= lo) & (y <= hi), axis=1)
+            scale = walk.scale
+            y, inside = walk.propose(x, rng)
             lpy = np.full(c, -np.inf)
             if inside.any():
                 lpy[inside] = run.evaluate(target, y[inside])
@@ -116,14 +101,7 @@ class MetropolisHastings(Sampler):
             x[accept], lp[accept] = y[accept], lpy[accept]
             acceptance[t], scales[t] = accept.mean(), scale
             run.offer(x, lp)
-            if t < self.burn_in and self.adapt:  # tune during burn-in only, then freeze
-                burn[t] = x
-                log_scale += (acceptance[t] - self.target_acceptance) / (t + 1) ** 0.6
-                new = self._shape(burn[t // 2: t + 1], hi - lo) if t >= 50 and t % 25 == 0 else None
-                if new is not None:
-                    chol = new
-                    if not shaped:  # leaving the initial kernel: optimal Gaussian scale
-                        log_scale, shaped = np.log(2.38 / np.sqrt(d)), True
+            walk.update(t, x, acceptance[t])
             kept.record(t, x, lp)
             run.step(t, kept.trace_ess(t), acceptance=float(acceptance[t]),
                      proposal_scale=float(scale))
@@ -132,16 +110,3 @@ class MetropolisHastings(Sampler):
                           seed=seed, chain=kept.chain(),
                           extra_vars={"acceptance": (("step",), acceptance),
                                       "proposal_scale": (("step",), scales)})
-
-    @staticmethod
-    def _shape(states: np.ndarray, width: np.ndarray) -> np.ndarray | None:
-        """Cholesky factor of the burn-in states' covariance, or None if degenerate."""
-        flat = states.reshape(-1, states.shape[-1])
-        cov = np.atleast_2d(np.cov(flat, rowvar=False))
-        floor = 1e-12 * width**2
-        if not np.all(np.isfinite(cov)) or np.any(np.diag(cov) <= floor):
-            return None
-        try:
-            return np.linalg.cholesky(cov + np.diag(floor))
-        except np.linalg.LinAlgError:
-            return None

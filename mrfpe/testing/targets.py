@@ -88,6 +88,28 @@ class CorrelatedGaussian(Target):
             parts.append(sub)
         return parts
 
+    # -- as a likelihood with a simulator (for doubly-intractable samplers' checks) ----------
+    #: Draws from the model are exact (:meth:`simulate`).
+    exact_simulator = True
+
+    def unnormalised(self, theta: Any, x: Any = None) -> np.ndarray:
+        """``log f(x | θ) = -½ Σ_m (x_m - θ)ᵀ P (x_m - θ)`` (N,) for observations ``x`` (k, 3).
+
+        ``log_prob(θ)`` equals ``unnormalised(θ)`` plus a constant inside the cube.
+        """
+        theta = as_theta_batch(theta, 3)
+        obs = self.obs if x is None else np.asarray(x, dtype=np.float64).reshape(-1, 3)
+        diff = obs[None, :, :] - theta[:, None, :]
+        return -0.5 * np.einsum("nmi,ij,nmj->n", diff, self._prec_obs, diff)
+
+    def simulate(self, theta: Any, n: int | None = None, *, seed: Any = None,
+                 **_: Any) -> np.ndarray:
+        """``n`` (default ``n_obs``) observations drawn from ``N(θ, Σ_obs)``: (n, 3)."""
+        th = as_theta_batch(theta, 3)[0]
+        k = self._k if n is None else int(n)
+        z = np.random.default_rng(seed).standard_normal((k, 3))
+        return th + z @ np.linalg.cholesky(self.cov * self.n_total).T
+
     def describe(self) -> dict:
         return {**super().describe(), "n_obs": int(self._k)}
 

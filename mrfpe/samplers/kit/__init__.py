@@ -39,6 +39,9 @@ Validators
     :func:`check_target`, :func:`check_seed`, :func:`check_positive_int`,
     :func:`check_range`, :func:`check_choice`, :func:`check_bool`,
     :func:`check_chain_length`.
+Random walks
+    :class:`AdaptiveRandomWalk` (Gaussian proposals in the box, adapted during
+    burn-in only), :func:`metropolis_accept` (the Metropolis rule).
 Starting points
     :func:`grid` (the thesis's evenly spaced set), :func:`space_filling`
     (scrambled Halton points, any dimension), :func:`draw_in_support`.
@@ -97,6 +100,7 @@ from mrfpe.samplers.kit.jitter import (
     log_mixture_density_chol,
     log_resampling_mixture,
 )
+from mrfpe.samplers.kit.random_walk import AdaptiveRandomWalk, metropolis_accept
 from mrfpe.samplers.kit.runlog import Run
 from mrfpe.validation import (
     check_bool,
@@ -114,6 +118,7 @@ __all__ = [
     "RESAMPLING_METHODS",
     "THESIS2_POWER",
     "THESIS_POWER",
+    "AdaptiveRandomWalk",
     "History",
     "KeptStates",
     "Run",
@@ -141,6 +146,7 @@ __all__ = [
     "log_ratio",
     "log_resampling_mixture",
     "map_batched",
+    "metropolis_accept",
     "normalise_log_weights",
     "partition_or_none",
     "perplexity",

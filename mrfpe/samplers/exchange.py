@@ -1,0 +1,230 @@
+"""The exchange algorithm: the posterior of a likelihood with an intractable normaliser.
+
+For ``p(x | θ) = f(x | θ) / Z(θ)`` with ``Z`` intractable (every MRF on a
+lattice), the posterior ``p(θ | x) ∝ f(x | θ) p(θ) / Z(θ)`` is *doubly
+intractable*: a Metropolis ratio would need ``Z(θ') / Z(θ)``. The exchange
+algorithm (Murray, Ghahramani & MacKay 2006) draws auxiliary data
+``y ~ p(· | θ')`` at the proposed ``θ'`` and accepts with
+
+    ``α = min(1, f(x | θ') f(y | θ) p(θ') / (f(x | θ) f(y | θ') p(θ)))``,
+
+in which the normalisers cancel; the chain's stationary distribution is the
+exact posterior when ``y`` is an exact draw. The prior is flat on the
+target's box, as for every sampler here (a posterior ∝ exp(log_prob) there).
+
+Auxiliary draws. A target with ``exact_simulator = True`` (the Gaussian MRF,
+the checks' Gaussian) gives exact draws. A discrete MRF's draws come from
+``aux_sweeps`` Swendsen-Wang or Gibbs sweeps started from the observed data
+(the approximate exchange algorithm of Caimo & Friel 2011; Everitt 2012
+bounds its error by the auxiliary chain's distance from stationarity). After
+burn-in the sampler measures the integrated autocorrelation time ``τ`` of the
+sufficient statistics of the auxiliary chain at the burn-in mean (``emcee``'s
+estimator on a pilot run of ``max(2000, 50 τ)`` sweeps); ``aux_sweeps="auto"``
+then takes ``10 τ`` sweeps (at least 10, at most ``max_aux_sweeps``): started
+at the data, a draw after ``10 τ`` sweeps keeps a correlation of about
+``e^-10`` with its start. At the end ``τ`` is measured again at the posterior
+mean; a run whose auxiliary chains were shorter than ``5 τ`` there (e.g. Gibbs
+near the critical coupling, where ``τ`` grows like ``L^2``) is marked
+unreliable, with the reason, in the posterior's diagnostics.
+
+The target must offer the likelihood interface of
+:class:`mrfpe.models.estimators.LikelihoodTarget` (``model.target("likelihood",
+x)``): ``log_prob(θ)`` = ``log f(x | θ)`` + const, ``unnormalised(θ, y)`` and
+``simulate(θ, n, seed=..., init=..., n_sweeps=...)``.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, ClassVar
+
+import numpy as np
+
+from mrfpe.samplers.base import Callback, Sampler, check_positive_int, check_range
+from mrfpe.samplers.kit import (
+    AdaptiveRandomWalk,
+    KeptStates,
+    Run,
+    check_bool,
+    check_chain_length,
+    check_seed,
+    check_target,
+    draw_in_support,
+    metropolis_accept,
+)
+
+__all__ = ["Exchange", "aux_autocorrelation_time", "check_likelihood_target"]
+
+#: Sweeps per pilot chunk when measuring the auxiliary chain's autocorrelation time.
+_PILOT_CHUNK = 250
+
+
+def check_likelihood_target(target: Any) -> None:
+    """ValueError unless ``target`` offers ``unnormalised`` and ``simulate`` (one line)."""
+    missing = [m for m in ("unnormalised", "simulate") if not callable(getattr(target, m, None))]
+    if missing:
+        name = getattr(target, "name", "") or type(target).__name__
+        raise ValueError(f"target must be a likelihood target with a simulator (e.g. "
+                         f"model.target('likelihood', x)); {name} has no "
+                         f"{' or '.join(missing)}")
+
+
+def _summary(target: Any, y: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    """Per-draw statistics (n, k): sufficient statistics where offered, else log f(y | θ)."""
+    stats = getattr(target, "sufficient_statistics", None)
+    if callable(stats):
+        return np.asarray(stats(y), dtype=np.float64)
+    return np.array([target.unnormalised(theta, yi[None])[0] for yi in y])[:, None]
+
+
+def aux_autocorrelation_time(target: Any, theta: np.ndarray, *, seed: int,
+                             max_sweeps: int = 20000) -> float:
+    """Integrated autocorrelation time (sweeps) of the auxiliary chain at ``theta``.
+
+    Runs the target's simulator one sweep per draw, started from the data, in
+    chunks of 250 sweeps until ``emcee.autocorr.integrated_time`` is trustworthy
+    (the chain is at least 50 τ long) or ``max_sweeps`` is reached; returns the
+    largest τ over the standardised sufficient statistics (``inf`` when the
+    chain is too short to tell).
+    """
+    from emcee.autocorr import integrated_time
+
+    rng = np.random.default_rng(seed)
+    x0 = getattr(target, "x", None)
+    init = "random" if x0 is None else x0[0]
+    rows, length = [], 0
+    while True:
+        y = target.simulate(theta, n=_PILOT_CHUNK, seed=int(rng.integers(2**63)), init=init,
+                            n_sweeps=1, thin=1)
+        init = y[-1]
+        rows.append(_summary(target, y, theta))
+        length += _PILOT_CHUNK
+        s = np.concatenate(rows)
+        sd = s.std(axis=0)
+        keep = sd > 0
+        if not keep.any():
+            return 1.0  # the chain does not move its statistics at all: nothing to wait for
+        z = (s[:, keep] - s[:, keep].mean(axis=0)) / sd[keep]
+        tau = float(np.max(integrated_time(z[:, None, :], quiet=True)))
+        if length >= 2000 and length >= 50 * tau:
+            return tau
+        if length >= max_sweeps:
+            return math.inf if length < 20 * tau else tau
+
+
+class Exchange(Sampler):
+    """Exchange algorithm for doubly-intractable posteriors (Murray et al. 2006).
+
+    Parameters
+    ----------
+    n_steps, n_chains, burn_in, thin, proposal_sd, adapt, target_acceptance
+        As :class:`mrfpe.samplers.mh.MetropolisHastings` (a random walk adapted
+        during burn-in only).
+    aux_sweeps : "auto" or int
+        Sweeps of the auxiliary chain per draw (ignored for exact simulators);
+        "auto": ``10 τ`` measured after burn-in (see the module docstring).
+    max_aux_sweeps : int
+        Cap of the automatic choice.
+    mixing_factor : float
+        The run is flagged unreliable when ``aux_sweeps < mixing_factor * τ`` at
+        the posterior mean (5).
+    """
+
+    name = "exchange"
+    conformance: ClassVar[dict] = {
+        "quick_config": {"n_steps": 1200, "burn_in": 300},
+        # analytic densities without a likelihood and simulator: exchange cannot run on them
+        "two_modes": False, "mostly_minus_inf": False,
+    }
+
+    def __init__(self, n_steps: int = 3000, n_chains: int = 4, burn_in: int = 600,
+                 thin: int = 1, proposal_sd: float = 0.05, adapt: bool = True,
+                 target_acceptance: float = 0.3, aux_sweeps: int | str = "auto",
+                 max_aux_sweeps: int = 2000, mixing_factor: float = 5.0):
+        self.n_steps, self.burn_in, self.thin = check_chain_length(n_steps, burn_in, thin)
+        self.n_chains = check_positive_int("n_chains", n_chains)
+        self.proposal_sd = check_range("proposal_sd", proposal_sd, 0.0, np.inf,
+                                       low_open=True, high_open=True)
+        self.adapt = check_bool("adapt", adapt)
+        self.target_acceptance = check_range("target_acceptance", target_acceptance, 0.0, 1.0,
+                                             low_open=True, high_open=True)
+        if aux_sweeps != "auto":
+            aux_sweeps = check_positive_int("aux_sweeps", aux_sweeps)
+        self.aux_sweeps = aux_sweeps
+        self.max_aux_sweeps = check_positive_int("max_aux_sweeps", max_aux_sweeps)
+        self.mixing_factor = check_range("mixing_factor", mixing_factor, 0.0, np.inf,
+                                         low_open=True, high_open=True)
+
+    def run(self, target: Any, *, seed: int | None, progress: bool = False,
+            callback: Callback | None = None):
+        """Run the chains on a likelihood ``target``; return the posterior Dataset."""
+        bounds = check_target(target)
+        check_likelihood_target(target)
+        check_seed(seed)
+        rng = np.random.default_rng(seed)
+        n, c, d = self.n_steps, self.n_chains, bounds.shape[0]
+        exact = bool(getattr(target, "exact_simulator", False))
+        sweeps = self._initial_sweeps(target)
+        run = Run(target, n, progress=progress, callback=callback, desc=self.name)
+        x, lp = draw_in_support(run, target, rng, c, bounds)
+        walk = AdaptiveRandomWalk(bounds, c, self.proposal_sd, self.burn_in, self.adapt,
+                                  self.target_acceptance)
+        acceptance = np.zeros(n)
+        kept = KeptStates(n, self.burn_in, self.thin, c, d)
+        tau_burn = math.nan
+        for t in range(n):
+            y, inside = walk.propose(x, rng)
+            lpy = np.full(c, -np.inf)
+            if inside.any():
+                lpy[inside] = run.evaluate(target, y[inside])
+            log_ratio = np.full(c, -np.inf)
+            for i in np.flatnonzero(inside & np.isfinite(lpy)):
+                aux = target.simulate(y[i], seed=int(rng.integers(2**63)), **(
+                    {} if exact else {"n_sweeps": sweeps, "init": "data"}))
+                u = target.unnormalised(np.stack([x[i], y[i]]), aux)
+                log_ratio[i] = (lpy[i] - lp[i]) + (u[0] - u[1])
+            accept = inside & metropolis_accept(np.log(rng.random(c)),
+                                                np.where(np.isfinite(lp), 0.0, lp), log_ratio)
+            x[accept], lp[accept] = y[accept], lpy[accept]
+            acceptance[t] = accept.mean()
+            run.offer(x, lp)
+            walk.update(t, x, acceptance[t])
+            if t == self.burn_in - 1 and not exact:
+                tau_burn = aux_autocorrelation_time(target, x.mean(axis=0),
+                                                    seed=int(rng.integers(2**63)))
+                if self.aux_sweeps == "auto":
+                    sweeps = self._auto_sweeps(tau_burn)
+            kept.record(t, x, lp)
+            run.step(t, kept.trace_ess(t), acceptance=float(acceptance[t]),
+                     aux_sweeps=float(sweeps))
+        theta, log_target, _ = kept.flat()
+        bias, tau_end = None, math.nan
+        if not exact:
+            tau_end = aux_autocorrelation_time(target, theta.mean(axis=0),
+                                               seed=int(rng.integers(2**63)))
+            if not sweeps >= self.mixing_factor * tau_end:
+                bias = (f"auxiliary chains of {sweeps} sweeps are shorter than "
+                        f"{self.mixing_factor:g} autocorrelation times ({tau_end:.1f} sweeps "
+                        f"at the posterior mean): the auxiliary draws are not from p(y | θ) "
+                        f"and the posterior is too wide; raise aux_sweeps (or max_aux_sweeps), "
+                        f"or use a simulator that mixes (sampler='swendsen_wang' for Potts)")
+        return run.finish(theta, log_target, None, sampler=self.name, config=self.get_config(),
+                          seed=seed, chain=kept.chain(), bias=bias,
+                          extra_vars={"acceptance": (("step",), acceptance)},
+                          extra_attrs={"aux_sweeps": float(sweeps) if not exact else 0.0,
+                                       "aux_tau_burn_in": float(tau_burn),
+                                       "aux_tau_posterior_mean": float(tau_end),
+                                       "exact_simulator": int(exact),
+                                       "log_target_note": "log_prob of the likelihood target: "
+                                       "log f(x | θ) without -log Z(θ); map_theta maximises "
+                                       "it, not the posterior"})
+
+    def _initial_sweeps(self, target: Any) -> int:
+        if self.aux_sweeps != "auto":
+            return int(self.aux_sweeps)
+        return int(min(getattr(target, "n_sweeps", 200), self.max_aux_sweeps))
+
+    def _auto_sweeps(self, tau: float) -> int:
+        if not math.isfinite(tau):
+            return self.max_aux_sweeps
+        return int(min(max(10, math.ceil(10 * tau)), self.max_aux_sweeps))

@@ -96,23 +96,28 @@ def _nonneg_int(name: str, value: Any) -> int:
 
 
 def _block_option(name: str, value: Any) -> Any:
-    if isinstance(value, Sequence) and len(value) == 2 and all(
-            isinstance(v, int | np.integer) and not isinstance(v, bool) for v in value):
-        bh, bw = int(value[0]), int(value[1])
-        if bh < 1 or bw < 1:
-            raise ValueError(f"{name} must be a tile (bh, bw) of positive integers; got {value!r}")
-        return (bh, bw)
-    if isinstance(value, int | np.integer) and not isinstance(value, bool) and value >= 1:
+    """A tile ``(bh, bw)`` (a tuple), a block size, a label per node, or a list of node arrays."""
+    if value is None:
+        return None
+    if isinstance(value, tuple):
+        if len(value) == 2 and all(isinstance(v, int | np.integer) and not isinstance(v, bool)
+                                   and v >= 1 for v in value):
+            return (int(value[0]), int(value[1]))
+        raise ValueError(f"{name} as a tuple must be a tile (bh, bw) of positive integers; "
+                         f"got {value!r}")
+    if isinstance(value, int | np.integer) and not isinstance(value, bool):
+        if value < 1:
+            raise ValueError(f"{name} as a block size must be >= 1; got {value!r}")
         return int(value)
-    arr = np.asarray(value) if not isinstance(value, Sequence) or not value or \
-        np.ndim(value[0]) == 0 else None
-    if arr is not None and arr.dtype.kind in "iu" and arr.ndim == 1:
-        return arr.astype(np.int64)  # a block label per node
-    if isinstance(value, Sequence) and value and all(np.ndim(v) == 1 for v in value):
-        return [np.asarray(v, dtype=np.int64) for v in value]
-    raise ValueError(f"{name} must be a tile (bh, bw) on a lattice, a block size for a "
-                     f"general graph, a block label per node, or a list of node-id arrays; "
-                     f"got {value!r}")
+    if isinstance(value, np.ndarray) and value.ndim == 1 and value.dtype.kind in "iu":
+        return value.astype(np.int64)  # a block label per node
+    if isinstance(value, list) and value:
+        if all(isinstance(v, int | np.integer) and not isinstance(v, bool) for v in value):
+            return np.asarray(value, dtype=np.int64)  # labels
+        if all(np.ndim(v) == 1 for v in value):
+            return [np.asarray(v, dtype=np.int64) for v in value]
+    raise ValueError(f"{name} must be a tile (bh, bw) on a lattice, a block size, a block label "
+                     f"per node, or a list of node-id arrays; got {value!r}")
 
 
 COMMON = (
@@ -126,13 +131,23 @@ ESTIMATOR_OPTIONS: dict[str, tuple[Option, ...]] = {
     "pl": COMMON,
     "coding": (*COMMON, Option("coding", "int >= 0", 0, _nonneg_int,
                                "which colour class (Besag coding) 0 .. n_codings - 1")),
-    "block": (*COMMON, Option("block", "(bh, bw) | int | labels | list of arrays", (2, 2),
+    "block": (*COMMON, Option("block", "(bh, bw) | int | labels | list of arrays | None", None,
                               _block_option,
-                              "tiles (bh, bw) anchored at the top-left corner on a lattice; "
-                              "a node partition on a general graph")),
+                              "tiles (bh, bw) anchored at the top-left corner on a lattice; a "
+                              "node partition on a general graph; None: (2, 2) tiles on a "
+                              "lattice, connected blocks of 4 nodes on a graph")),
     "exact": (*COMMON, Option("method", "'auto' | 'enumerate' | 'eliminate'", "auto",
                               choice_check("auto", "enumerate", "eliminate"),
                               "log Z by enumeration (tiny) or variable elimination")),
+    "pl_adjusted": (*COMMON,
+                    Option("mode", "'mcmc_mle' | 'mple'", "mcmc_mle",
+                           choice_check("mcmc_mle", "mple"),
+                           "peak at the Monte Carlo MLE, or at the MPLE (curvature only)"),
+                    Option("n_draws", "int >= 10", 1000,
+                           lambda n, v: check_positive_int(n, v, minimum=10),
+                           "simulations per Fisher information / MCMC-MLE round"),
+                    Option("seed", "int >= 0", 0, _nonneg_int,
+                           "seed of every simulation of the calibration")),
     "likelihood": (*COMMON, Option("sampler", "'auto' | 'gibbs' | 'swendsen_wang'", "auto",
                                    choice_check("auto", "gibbs", "swendsen_wang"),
                                    "the simulator used for auxiliary draws"),
@@ -161,7 +176,7 @@ class MRF(Model):
     name : str
     """
 
-    estimators = ("pl", "coding", "block", "exact", "likelihood")
+    estimators = ("pl", "coding", "block", "exact", "likelihood", "pl_adjusted")
     estimator_options = ESTIMATOR_OPTIONS
 
     def __init__(self, graph: Any = 4, n_states: int = 2, terms: Sequence[Term] | None = None,
@@ -360,6 +375,14 @@ class MRF(Model):
         if estimator == "likelihood":
             return est.LikelihoodTarget(sampler=options["sampler"],
                                         n_sweeps=options["n_sweeps"], **common)
+        if estimator == "pl_adjusted":
+            from mrfpe.models.calibration import AdjustedPL
+
+            pl = est.ConditionalTarget(rows=[design.conditional_rows(x)],
+                                       nodes=np.arange(design.graph.n_nodes), **common)
+            lik = est.LikelihoodTarget(**common)
+            return AdjustedPL(pl, lik, mode=options["mode"], n_draws=options["n_draws"],
+                              seed=options["seed"])
         raise AssertionError(estimator)  # pragma: no cover - check_estimator ran
 
     # -- simulation ------------------------------------------------------------------------------

@@ -136,7 +136,7 @@ class ExactTarget(ModelTarget):
         return float(getattr(self._log_z, "_row_bytes", 0.0))
 
     def log_partition(self, theta: Any) -> np.ndarray:
-        """``log Z(theta)`` (N,)."""
+        """``log Z(theta)`` (N,) of one configuration (``log_prob`` subtracts M of them)."""
         theta = as_theta_batch(theta, self.ndim)
         return self._log_z(self.design.psi(theta))
 
@@ -206,11 +206,14 @@ def make_blocks(graph: Graph, block: Any, q: int) -> list[np.ndarray]:
     """Node blocks from a tile ``(bh, bw)`` (lattice), a size, labels or explicit arrays.
 
     Tiles are anchored at the top-left corner; partial tiles fill the right and
-    bottom edges. On a general graph an integer ``m`` groups nodes in
-    consecutive runs of ``m`` (give labels or arrays for a meaningful partition).
+    bottom edges. An integer ``m`` grows connected blocks of up to ``m`` nodes
+    breadth-first (on a lattice too); ``None`` means ``(2, 2)`` tiles on a
+    lattice and ``m = 4`` on a general graph.
     Every block must have at most :data:`MAX_BLOCK_CONFIGURATIONS` joint states.
     """
     n = graph.n_nodes
+    if block is None:
+        block = (2, 2) if graph.shape is not None else 4
     if isinstance(block, tuple):
         if graph.shape is None:
             raise ValueError("block must be a node partition (labels or arrays) on a general "
@@ -220,7 +223,7 @@ def make_blocks(graph: Graph, block: Any, q: int) -> list[np.ndarray]:
         r, c = np.divmod(np.arange(n), W)
         labels = (r // bh) * (-(-W // bw)) + c // bw
     elif isinstance(block, int):
-        labels = np.arange(n) // block
+        labels = _connected_runs(graph, block)
     elif isinstance(block, np.ndarray):
         labels = block
         if labels.shape != (n,):
@@ -244,6 +247,27 @@ def make_blocks(graph: Graph, block: Any, q: int) -> list[np.ndarray]:
     blocks = np.split(order.astype(np.int64), bounds)
     _check_block_sizes(blocks, q)
     return blocks
+
+
+def _connected_runs(graph: Graph, m: int) -> np.ndarray:
+    """Block labels: connected groups of up to ``m`` nodes grown breadth-first in id order."""
+    indptr, nbr, _ = graph.neighbours()
+    labels = np.full(graph.n_nodes, -1, dtype=np.int64)
+    current = 0
+    for start in range(graph.n_nodes):
+        if labels[start] >= 0:
+            continue
+        queue, size = [start], 0
+        labels[start] = current
+        while queue and size < m:
+            v = queue.pop(0)
+            size += 1
+            for w in nbr[indptr[v]:indptr[v + 1]]:
+                if labels[w] < 0 and size + len(queue) < m:
+                    labels[w] = current
+                    queue.append(int(w))
+        current += 1
+    return labels
 
 
 def _check_block_sizes(blocks: Sequence[np.ndarray], q: int) -> None:

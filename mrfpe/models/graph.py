@@ -324,6 +324,8 @@ def from_adjacency(adjacency: Any, edge_type: Any = None,
         if T.shape != A.shape:
             raise ValueError(f"edge_type must have the adjacency's shape {A.shape}; "
                              f"got {T.shape}")
+        if (T != T.T).nnz:
+            raise ValueError("edge_type must be symmetric (an undirected edge has one type)")
         types = np.asarray(T[edges[:, 0], edges[:, 1]]).ravel().astype(np.int64) - 1
         if np.any(types < 0):
             raise ValueError("edge_type must give every edge a type >= 1")

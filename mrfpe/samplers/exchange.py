@@ -40,6 +40,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from mrfpe.models.mixing import autocorrelation_time
 from mrfpe.samplers.base import Callback, Sampler, check_positive_int, check_range
 from mrfpe.samplers.kit import (
     AdaptiveRandomWalk,
@@ -53,10 +54,7 @@ from mrfpe.samplers.kit import (
     metropolis_accept,
 )
 
-__all__ = ["Exchange", "aux_autocorrelation_time", "check_likelihood_target"]
-
-#: Sweeps per pilot chunk when measuring the auxiliary chain's autocorrelation time.
-_PILOT_CHUNK = 250
+__all__ = ["Exchange", "check_likelihood_target"]
 
 
 def check_likelihood_target(target: Any) -> None:
@@ -67,49 +65,6 @@ def check_likelihood_target(target: Any) -> None:
         raise ValueError(f"target must be a likelihood target with a simulator (e.g. "
                          f"model.target('likelihood', x)); {name} has no "
                          f"{' or '.join(missing)}")
-
-
-def _summary(target: Any, y: np.ndarray, theta: np.ndarray) -> np.ndarray:
-    """Per-draw statistics (n, k): sufficient statistics where offered, else log f(y | θ)."""
-    stats = getattr(target, "sufficient_statistics", None)
-    if callable(stats):
-        return np.asarray(stats(y), dtype=np.float64)
-    return np.array([target.unnormalised(theta, yi[None])[0] for yi in y])[:, None]
-
-
-def aux_autocorrelation_time(target: Any, theta: np.ndarray, *, seed: int,
-                             max_sweeps: int = 20000) -> float:
-    """Integrated autocorrelation time (sweeps) of the auxiliary chain at ``theta``.
-
-    Runs the target's simulator one sweep per draw, started from the data, in
-    chunks of 250 sweeps until ``emcee.autocorr.integrated_time`` is trustworthy
-    (the chain is at least 50 τ long) or ``max_sweeps`` is reached; returns the
-    largest τ over the standardised sufficient statistics (``inf`` when the
-    chain is too short to tell).
-    """
-    from emcee.autocorr import integrated_time
-
-    rng = np.random.default_rng(seed)
-    x0 = getattr(target, "x", None)
-    init = "random" if x0 is None else x0[0]
-    rows, length = [], 0
-    while True:
-        y = target.simulate(theta, n=_PILOT_CHUNK, seed=int(rng.integers(2**63)), init=init,
-                            n_sweeps=1, thin=1)
-        init = y[-1]
-        rows.append(_summary(target, y, theta))
-        length += _PILOT_CHUNK
-        s = np.concatenate(rows)
-        sd = s.std(axis=0)
-        keep = sd > 0
-        if not keep.any():
-            return 1.0  # the chain does not move its statistics at all: nothing to wait for
-        z = (s[:, keep] - s[:, keep].mean(axis=0)) / sd[keep]
-        tau = float(np.max(integrated_time(z[:, None, :], quiet=True)))
-        if length >= 2000 and length >= 50 * tau:
-            return tau
-        if length >= max_sweeps:
-            return math.inf if length < 20 * tau else tau
 
 
 class Exchange(Sampler):
@@ -133,11 +88,9 @@ class Exchange(Sampler):
     name = "exchange"
     conformance: ClassVar[dict] = {
         "quick_config": {"n_steps": 1200, "burn_in": 300},
-        # analytic densities without a likelihood and simulator: exchange cannot run on them
-        "two_modes": False, "mostly_minus_inf": False,
     }
 
-    def __init__(self, n_steps: int = 3000, n_chains: int = 4, burn_in: int = 600,
+    def __init__(self, n_steps: int = 4000, n_chains: int = 4, burn_in: int = 1000,
                  thin: int = 1, proposal_sd: float = 0.05, adapt: bool = True,
                  target_acceptance: float = 0.3, aux_sweeps: int | str = "auto",
                  max_aux_sweeps: int = 2000, mixing_factor: float = 5.0):
@@ -190,7 +143,7 @@ class Exchange(Sampler):
             run.offer(x, lp)
             walk.update(t, x, acceptance[t])
             if t == self.burn_in - 1 and not exact:
-                tau_burn = aux_autocorrelation_time(target, x.mean(axis=0),
+                tau_burn = autocorrelation_time(target, x.mean(axis=0),
                                                     seed=int(rng.integers(2**63)))
                 if self.aux_sweeps == "auto":
                     sweeps = self._auto_sweeps(tau_burn)
@@ -200,7 +153,7 @@ class Exchange(Sampler):
         theta, log_target, _ = kept.flat()
         bias, tau_end = None, math.nan
         if not exact:
-            tau_end = aux_autocorrelation_time(target, theta.mean(axis=0),
+            tau_end = autocorrelation_time(target, theta.mean(axis=0),
                                                seed=int(rng.integers(2**63)))
             if not sweeps >= self.mixing_factor * tau_end:
                 bias = (f"auxiliary chains of {sweeps} sweeps are shorter than "

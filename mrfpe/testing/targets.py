@@ -137,6 +137,28 @@ class TwoModes(Target):
     def max_log_prob(self) -> float:
         return float(self.log_prob(self.high)[0])
 
+    # -- as a likelihood: one observation ``high`` of ``y ~ w N(θ, s²) + (1-w) N(θ + δ, s²)``,
+    # δ = high - low, w = 1/(1 + e^-1); Z(θ) = 1, so the posterior is this target exactly.
+    exact_simulator = True
+
+    def unnormalised(self, theta: Any, x: Any = None) -> np.ndarray:
+        """``log f(x | θ)`` (N,) of observations ``x`` (k, 2) (default the one observation)."""
+        theta = as_theta_batch(theta, 2)
+        obs = self.high[None] if x is None else np.asarray(x, dtype=np.float64).reshape(-1, 2)
+        d = self.high - self.low
+        a = -0.5 * np.sum((obs[None] - theta[:, None]) ** 2, -1) / self.scale**2
+        b = -1.0 - 0.5 * np.sum((obs[None] - theta[:, None] - d) ** 2, -1) / self.scale**2
+        return np.logaddexp(a, b).sum(axis=1)
+
+    def simulate(self, theta: Any, n: int | None = None, *, seed: Any = None,
+                 **_: Any) -> np.ndarray:
+        """``n`` (default 1) observations from the two-component location mixture."""
+        th = as_theta_batch(theta, 2)[0]
+        rng = np.random.default_rng(seed)
+        k = 1 if n is None else int(n)
+        shift = (rng.random(k) < 1.0 / (1.0 + np.e))[:, None] * (self.high - self.low)
+        return th + shift + self.scale * rng.standard_normal((k, 2))
+
     def residuals(self, theta: Any) -> np.ndarray:
         theta = as_theta_batch(theta, 2)
         lp = self.log_prob(theta)
@@ -162,6 +184,24 @@ class MostlyMinusInf(Target):
         out = np.full(theta.shape[0], -np.inf)
         out[inside] = -0.5 * np.sum((theta[inside] - centre) ** 2, axis=1) / 0.05**2
         return out
+
+    # -- as a likelihood: one observation (the box's centre) of ``y ~ N(θ, 0.05² I)``, the
+    # box being the prior's support; Z(θ) is constant, so the posterior is this target.
+    exact_simulator = True
+
+    def unnormalised(self, theta: Any, x: Any = None) -> np.ndarray:
+        """``log f(x | θ)`` (N,) of observations ``x`` (k, 3) (default the box's centre)."""
+        theta = as_theta_batch(theta, 3)
+        obs = self.box.mean(axis=1)[None] if x is None else np.asarray(
+            x, dtype=np.float64).reshape(-1, 3)
+        return -0.5 * np.sum((obs[None] - theta[:, None]) ** 2, axis=(1, 2)) / 0.05**2
+
+    def simulate(self, theta: Any, n: int | None = None, *, seed: Any = None,
+                 **_: Any) -> np.ndarray:
+        """``n`` (default 1) observations from ``N(θ, 0.05² I)``."""
+        th = as_theta_batch(theta, 3)[0]
+        k = 1 if n is None else int(n)
+        return th + 0.05 * np.random.default_rng(seed).standard_normal((k, 3))
 
     def residuals(self, theta: Any) -> np.ndarray:
         theta = as_theta_batch(theta, 3)

@@ -1,0 +1,74 @@
+"""Fisher information, MCMC-MLE, the adjusted pseudolikelihood and the parametric bootstrap,
+against exact routes (variable elimination) on small lattices."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mrfpe import models
+from mrfpe.models.calibration import (
+    AdjustedPL,
+    _hessian,
+    _step,
+    fisher_information,
+    mcmc_mle,
+    parametric_bootstrap,
+    simulate_draws,
+)
+from mrfpe.targets import maximise
+
+
+@pytest.fixture(scope="module")
+def ising():
+    m = models.ising()
+    x = m.simulate([0.3, 0.05], shape=(8, 8), seed=1, n_sweeps=300)
+    return m, x, m.target("exact", x), m.target("likelihood", x), m.target("pl", x)
+
+
+def test_fisher_information_is_the_hessian_of_log_z(ising):
+    m, x, exact, lik, _ = ising
+    th = np.array([0.3, 0.1])
+    want = _hessian(exact.log_partition, th, _step(exact))
+    got = fisher_information(lik, simulate_draws(lik, th, 3000, seed=0))
+    np.testing.assert_allclose(got, want, rtol=0.15, atol=0.05 * np.abs(want).max())
+
+
+def test_mcmc_mle_finds_the_exact_mle(ising):
+    m, x, exact, lik, pl = ising
+    mle, _ = maximise(exact)
+    res = mcmc_mle(lik, maximise(pl)[0], seed=0)
+    assert res.converged
+    assert np.all(np.abs(res.theta - mle) < 0.25 * res.se), (res.theta, mle, res.se)
+
+
+def test_adjusted_pl_peaks_at_the_mle_with_the_fisher_curvature(ising):
+    m, x, exact, lik, pl = ising
+    adj = m.target("pl_adjusted", x, seed=2)
+    assert isinstance(adj, AdjustedPL)
+    top, _ = maximise(adj)
+    np.testing.assert_allclose(top, adj.theta_ml, atol=2e-3)
+    H = -_hessian(adj._log_prob, adj.theta_ml, _step(adj))
+    np.testing.assert_allclose(H, adj.fisher_information, rtol=0.02,
+                               atol=0.02 * np.abs(H).max())
+    assert adj.log_prob(adj.theta_ml)[0] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_adjustment_refuses_what_it_cannot_do():
+    m = models.ising()
+    with pytest.raises(ValueError, match="face"):
+        m.target("pl_adjusted", np.zeros((6, 6), dtype=int))  # MPLE at the field's bound
+    crf = models.autologistic(["z"])
+    x = models.potts(2).simulate([0.4, 0.0], shape=(8, 8), seed=0)
+    with pytest.raises(ValueError, match="singular|face|Hessian"):
+        crf.target("pl_adjusted", x, covariates={"z": np.zeros((8, 8))})
+    with pytest.raises(ValueError, match="mode"):
+        m.target("pl_adjusted", x, mode="one_step")
+
+
+def test_parametric_bootstrap_schema_and_spread(ising):
+    m, x, exact, lik, pl = ising
+    boot = parametric_bootstrap(m, x, n_boot=30, seed=0)
+    assert boot.attrs["kind"] == "optima" and boot["theta"].shape == (30, 2)
+    spread = boot["theta"].values.std(0)
+    assert np.all(spread > 0) and np.all(spread < 1.0)

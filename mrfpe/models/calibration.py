@@ -159,8 +159,9 @@ def mcmc_mle(lik: Any, theta0: Any, *, n_draws: int = 1000, max_iter: int = 10,
     b = np.asarray(lik.bounds, dtype=np.float64)
     M = int(getattr(lik, "n_observations", 1))
     theta = as_theta_batch(theta0, lik.ndim)[0].copy()
-    sims, converged = 0, False
-    for it in range(1, max_iter + 1):
+    sims, converged, it = 0, False, 0
+    while it < max_iter:
+        it += 1
         draws = simulate_draws(lik, theta, n_draws, seed=int(rng.integers(2**63)))
         sims += draws.n_sweeps
         info = fisher_information(lik, draws)

@@ -27,7 +27,7 @@ def ising():
 
 
 def test_fisher_information_is_the_hessian_of_log_z(ising):
-    m, x, exact, lik, _ = ising
+    _m, _x, exact, lik, _ = ising
     th = np.array([0.3, 0.1])
     want = _hessian(exact.log_partition, th, _step(exact))
     got = fisher_information(lik, simulate_draws(lik, th, 3000, seed=0))
@@ -35,7 +35,7 @@ def test_fisher_information_is_the_hessian_of_log_z(ising):
 
 
 def test_mcmc_mle_finds_the_exact_mle(ising):
-    m, x, exact, lik, pl = ising
+    _m, _x, exact, lik, pl = ising
     mle, _ = maximise(exact)
     res = mcmc_mle(lik, maximise(pl)[0], seed=0)
     assert res.converged
@@ -43,7 +43,7 @@ def test_mcmc_mle_finds_the_exact_mle(ising):
 
 
 def test_adjusted_pl_peaks_at_the_mle_with_the_fisher_curvature(ising):
-    m, x, exact, lik, pl = ising
+    m, x, _exact, _lik, _pl = ising
     adj = m.target("pl_adjusted", x, seed=2)
     assert isinstance(adj, AdjustedPL)
     top, _ = maximise(adj)
@@ -60,14 +60,14 @@ def test_adjustment_refuses_what_it_cannot_do():
         m.target("pl_adjusted", np.zeros((6, 6), dtype=int))  # MPLE at the field's bound
     crf = models.autologistic(["z"])
     x = models.potts(2).simulate([0.4, 0.0], shape=(8, 8), seed=0)
-    with pytest.raises(ValueError, match="singular|face|Hessian"):
+    with pytest.raises(ValueError, match=r"singular|face|Hessian"):
         crf.target("pl_adjusted", x, covariates={"z": np.zeros((8, 8))})
     with pytest.raises(ValueError, match="mode"):
         m.target("pl_adjusted", x, mode="one_step")
 
 
 def test_parametric_bootstrap_schema_and_spread(ising):
-    m, x, exact, lik, pl = ising
+    m, x, _exact, _lik, _pl = ising
     boot = parametric_bootstrap(m, x, n_boot=30, seed=0)
     assert boot.attrs["kind"] == "optima" and boot["theta"].shape == (30, 2)
     spread = boot["theta"].values.std(0)

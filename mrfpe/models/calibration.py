@@ -241,21 +241,26 @@ class AdjustedPL(Target):
         self.mode = mode
         self.mle = None
         b = self.bounds
-        theta_pl, _ = maximise(pl, seed=seed)
+        # a grid of at most ~4096 points whatever the dimension, then the local polish
+        theta_pl, _ = maximise(pl, grid=max(3, int(4096 ** (1 / b.shape[0]))), seed=seed)
         h = _step(pl)
-        edge = np.minimum(theta_pl - b[:, 0], b[:, 1] - theta_pl) < 1e-3 * (b[:, 1] - b[:, 0])
+        H = -_hessian(pl._log_prob, theta_pl, h)
+        dist = np.minimum(theta_pl - b[:, 0], b[:, 1] - theta_pl)
+        try:
+            m_chol = np.linalg.cholesky(H).T  # H = MᵀM
+            sd = np.sqrt(np.diag(np.linalg.inv(H)))
+        except np.linalg.LinAlgError:
+            m_chol, sd = None, np.full(b.shape[0], np.inf)
+        edge = (dist < 1e-6 * (b[:, 1] - b[:, 0])) | (dist < sd)
         if edge.any():
-            raise ValueError(f"the MPLE lies on the bounds' face for "
+            raise ValueError(f"the MPLE lies on (or within one PL sd of) the bounds' face for "
                              f"{[self.param_names[i] for i in np.flatnonzero(edge)]} "
                              f"(theta {theta_pl.round(4).tolist()}): the adjustment needs an "
                              f"interior mode (widen the bounds, or the data carry no "
                              f"information on these parameters)")
-        H = -_hessian(pl._log_prob, theta_pl, h)
-        try:
-            m_chol = np.linalg.cholesky(H).T  # H = MᵀM
-        except np.linalg.LinAlgError:
+        if m_chol is None:
             raise ValueError(f"the PL's Hessian is not negative definite at the MPLE "
-                             f"{theta_pl.round(4).tolist()}: no curvature to adjust") from None
+                             f"{theta_pl.round(4).tolist()}: no curvature to adjust")
         rng = np.random.default_rng(seed)
         if mode == "mcmc_mle":
             res = mcmc_mle(lik, theta_pl, n_draws=n_draws, seed=int(rng.integers(2**63)))
@@ -303,7 +308,8 @@ def parametric_bootstrap(model: Any, data: Any, *, n_boot: int = 200, estimator:
 
     rng = np.random.default_rng(seed)
     target = model.target(estimator, data, **options)
-    theta_hat, value = maximise(target, seed=int(rng.integers(2**31)))
+    grid = max(3, int(4096 ** (1 / target.ndim)))
+    theta_hat, value = maximise(target, grid=grid, seed=int(rng.integers(2**31)))
     lik = model.target("likelihood", data, **{k: v for k, v in options.items()
                                                if k in ("covariates", "bounds")})
     draws = simulate_draws(lik, theta_hat, n_boot * lik.n_observations,
@@ -316,7 +322,7 @@ def parametric_bootstrap(model: Any, data: Any, *, n_boot: int = 200, estimator:
     for k in range(n_boot):
         yk = draws.y[k * lik.n_observations:(k + 1) * lik.n_observations]
         tk = model.target(estimator, yk.reshape(-1, *shape), **options)
-        t, v = maximise(tk, seed=int(rng.integers(2**31)))
+        t, v = maximise(tk, grid=grid, seed=int(rng.integers(2**31)))
         fits.append(t)
         values.append(v)
     return build(np.array(fits), np.array(values), param_names=target.param_names,

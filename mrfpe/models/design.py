@@ -37,8 +37,12 @@ import numpy as np
 
 from mrfpe.models.graph import Graph
 
-__all__ = ["MAX_BLOCK_CONFIGURATIONS", "ConditionalRows", "Design", "softmax_rows_log_prob",
-           "unique_rows"]
+__all__ = ["FORBIDDEN", "MAX_BLOCK_CONFIGURATIONS", "ConditionalRows", "Design",
+           "softmax_rows_log_prob", "unique_rows"]
+
+#: The log potential that stands for -inf (a forbidden state or pair) in feature vectors:
+#: exp() of it is 0 all the same, and a zero feature times it stays 0 (0 * -inf is NaN).
+FORBIDDEN = -1e300
 
 #: Largest number of joint states of one block that block pseudolikelihood enumerates.
 MAX_BLOCK_CONFIGURATIONS = 1 << 12

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from mrfpe.models.base import Model
-from mrfpe.models.design import Design, check_configurations
+from mrfpe.models.design import FORBIDDEN, Design, check_configurations
 from mrfpe.models.graph import Graph, LatticeSpec, as_graph_spec
 from mrfpe.models.terms import EdgeCovariate, Term
 from mrfpe.targets.base import Target
@@ -35,9 +35,6 @@ from mrfpe.targets.options import Option, choice_check, optional
 from mrfpe.validation import check_positive_int
 
 __all__ = ["FORBIDDEN", "MRF", "Potential"]
-
-#: The log potential that stands for -inf (a forbidden state) in a general Potential.
-FORBIDDEN = -1e300
 
 
 @dataclass(frozen=True)
@@ -367,7 +364,7 @@ class MRF(Model):
                                          **common)
         if estimator == "block":
             blocks = est.make_blocks(design.graph, options["block"], design.q)
-            return est.ConditionalTarget(rows=design.block_rows(x, blocks),
+            return est.ConditionalTarget(rows=design.block_rows(x, blocks), blocks=blocks,
                                          extra={"block": _jsonable(options["block"]),
                                                 "n_blocks": len(blocks)}, **common)
         if estimator == "exact":

@@ -30,6 +30,7 @@ from mrfpe.models.design import (
 )
 from mrfpe.models.graph import Graph
 from mrfpe.targets.base import Target, as_theta_batch
+from mrfpe.validation import check_seed
 
 __all__ = ["ConditionalTarget", "ExactTarget", "LikelihoodTarget", "ModelTarget",
            "make_blocks"]
@@ -71,40 +72,52 @@ class ConditionalTarget(ModelTarget):
     """``sum_r w_r log p(alternative_r | blanket_r)`` over distinct conditional rows."""
 
     def __init__(self, *, rows: Sequence[ConditionalRows], nodes: np.ndarray | None = None,
-                 **kwargs: Any) -> None:
+                 blocks: Sequence[np.ndarray] | None = None, **kwargs: Any) -> None:
         super().__init__(**kwargs)
         self.rows = tuple(rows)
-        #: The nodes whose full conditionals the target sums (pl, coding); None for blocks.
+        #: The nodes whose full conditionals the target sums (pl, coding) ...
         self.nodes = None if nodes is None else np.asarray(nodes, dtype=np.int64)
+        #: ... or the blocks whose joint conditionals it sums (block).
+        self.blocks = None if blocks is None else [np.asarray(b, np.int64) for b in blocks]
 
     def partition(self, k: int | None = None, kind: str = "strided") -> list[ConditionalTarget]:
-        """Sub-lattice targets over disjoint node subsets whose log_probs sum to this one's.
+        """Sub-targets over disjoint node (or block) subsets whose log_probs sum to this one's.
 
         ``kind="coding"``: the graph's colour classes within this target's nodes
         (Besag's codings; ``k`` must be None or their number); ``"strided"`` /
-        ``"block"``: :func:`mrfpe.lattice.split_ids` over the node ids (thesis
-        5.67, 5.68), which are codings only by accident of the lattice width.
+        ``"block"``: :func:`mrfpe.lattice.split_ids` over the node ids -- or over
+        the blocks of a block pseudolikelihood (thesis 5.67, 5.68) -- which are
+        codings only by accident of the lattice width.
         """
         from mrfpe.lattice import split_ids
 
-        if self.nodes is None:
-            raise ValueError("partition needs a target of full conditionals (pl or coding); "
-                             "block pseudolikelihood has no node split")
-        if kind == "coding":
-            colours = self.design.graph.colouring()[self.nodes]
-            groups = [self.nodes[colours == c] for c in np.unique(colours)]
-            if k is not None and k != len(groups):
-                raise ValueError(f"k must be None or {len(groups)} (the number of codings) for "
-                                 f"kind='coding'; got {k!r}")
+        if self.blocks is not None:
+            if kind == "coding":
+                raise ValueError("kind='coding' needs a target of full conditionals (pl, "
+                                 "coding); a block pseudolikelihood splits by blocks")
+            parts = split_ids(np.arange(len(self.blocks)), k, kind, what="the target's blocks")
+            groups = [[self.blocks[i] for i in p] for p in parts]
+            sizes = [sum(b.size for b in g) for g in groups]
+            rows = [self.design.block_rows(self.x, g) for g in groups]
+            units = [{"blocks": g} for g in groups]
         else:
-            groups = split_ids(self.nodes, k, kind, what="the target's nodes")
-        n_total = self.design.graph.n_nodes * self.x.shape[0]
-        return [ConditionalTarget(rows=[self.design.conditional_rows(self.x, g)], nodes=g,
-                                  model=self.model, design=self.design, x=self.x,
+            if kind == "coding":
+                colours = self.design.graph.colouring()[self.nodes]
+                groups = [self.nodes[colours == c] for c in np.unique(colours)]
+                if k is not None and k != len(groups):
+                    raise ValueError(f"k must be None or {len(groups)} (the number of codings) "
+                                     f"for kind='coding'; got {k!r}")
+            else:
+                groups = split_ids(self.nodes, k, kind, what="the target's nodes")
+            sizes = [g.size for g in groups]
+            rows = [[self.design.conditional_rows(self.x, g)] for g in groups]
+            units = [{"nodes": g} for g in groups]
+        total = max(sum(sizes), 1)
+        return [ConditionalTarget(rows=r, **u, model=self.model, design=self.design, x=self.x,
                                   param_names=self.param_names, bounds=self.bounds,
-                                  estimator=self.estimator,
-                                  cost=g.size * self.x.shape[0] / n_total, extra=self._extra)
-                for g in groups]
+                                  estimator=self.estimator, cost=self.cost * s / total,
+                                  extra=self._extra)
+                for r, u, s in zip(rows, units, sizes, strict=True)]
 
     @property
     def n_rows(self) -> int:
@@ -194,7 +207,10 @@ class LikelihoodTarget(ModelTarget):
         psi = self.design.psi(th)[0]
         sweeps = self.n_sweeps if n_sweeps is None else n_sweeps
         if isinstance(init, str) and init == "data":
-            rng = np.random.default_rng(seed)
+            if n not in (None, self.n_observations):
+                raise ValueError(f"n must be None (one draw per observed configuration, "
+                                 f"{self.n_observations}) with init='data'; got {n!r}")
+            rng = np.random.default_rng(check_seed(seed))
             return np.concatenate([
                 simulate(self.design, psi, 1, seed=int(rng.integers(2**63)), method=self.sampler,
                          n_sweeps=sweeps, init=xm) for xm in self.x])

@@ -112,6 +112,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from mrfpe.models.base import Model
+from mrfpe.models.discrete import ESTIMATOR_OPTIONS as DISCRETE_OPTIONS
 from mrfpe.models.graph import NEIGHBOURHOODS, Graph, LatticeSpec, as_graph_spec
 from mrfpe.targets.base import Target, as_theta_batch
 from mrfpe.targets.options import Option, choice_check, optional
@@ -513,6 +514,7 @@ ESTIMATOR_OPTIONS: dict[str, tuple[Option, ...]] = {
     "likelihood": (*COMMON, Option("sampler", "'auto' | 'fft' | 'dense' | 'sparse'", "auto",
                                    choice_check("auto", "fft", "dense", "sparse"),
                                    "the exact simulator used for auxiliary draws")),
+    "pl_adjusted": (*COMMON, *DISCRETE_OPTIONS["pl_adjusted"][len(DISCRETE_OPTIONS["pl"]):]),
 }
 
 
@@ -540,7 +542,7 @@ class GaussianMRF(Model):
     name : str
     """
 
-    estimators = ("pl", "coding", "block", "exact", "likelihood")
+    estimators = ("pl", "coding", "block", "exact", "likelihood", "pl_adjusted")
     estimator_options = ESTIMATOR_OPTIONS
 
     def __init__(self, graph: Any = 4, *, directional: bool = False, periodic: bool = False,
@@ -801,6 +803,13 @@ class GaussianMRF(Model):
             return GaussianExactTarget(method=options["method"], **common)
         if estimator == "likelihood":
             return GaussianLikelihoodTarget(sampler=options["sampler"], **common)
+        if estimator == "pl_adjusted":
+            from mrfpe.models.calibration import AdjustedPL
+
+            return AdjustedPL(GaussianPLTarget(**{**common, "estimator": "pl"}),
+                              GaussianLikelihoodTarget(**{**common, "estimator": "likelihood"}),
+                              mode=options["mode"], n_draws=options["n_draws"],
+                              seed=options["seed"])
         raise AssertionError(estimator)  # pragma: no cover - check_estimator ran
 
     # -- parameters in use -----------------------------------------------------------------------
@@ -1299,6 +1308,9 @@ class GaussianLikelihoodTarget(GaussianTarget):
     over theta on its own; doubly-intractable samplers (the exchange algorithm)
     use it with :meth:`simulate`. It is ``-inf`` outside the PD region.
     """
+
+    #: Draws are exact (Cholesky / FFT): the exchange algorithm is then exact too.
+    exact_simulator = True
 
     def __init__(self, *, sampler: str = "auto", **kwargs: Any) -> None:
         super().__init__(**kwargs)

@@ -87,6 +87,7 @@ class Graph:
         etype.setflags(write=False)
         self.edges, self.edge_type = edges, etype
         self._colours = None
+        self._neighbours: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         if colours is not None:
             c = np.asarray(colours, dtype=np.int64).reshape(-1)
             if c.shape != (self.n_nodes,) or np.any(c[edges[:, 0]] == c[edges[:, 1]]):
@@ -105,6 +106,11 @@ class Graph:
 
     def neighbours(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """CSR ``(indptr, neighbour, edge_index)``: every node's neighbours and the joining edge."""
+        if self._neighbours is None:  # a cache of a pure function of the (immutable) graph
+            self._neighbours = self._build_neighbours()
+        return self._neighbours
+
+    def _build_neighbours(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         e = self.edges
         src = np.concatenate([e[:, 0], e[:, 1]])
         dst = np.concatenate([e[:, 1], e[:, 0]])
@@ -206,9 +212,10 @@ class LatticeSpec:
             types.append(np.full(pair.shape[0], t if self.directional else 0))
         e = np.concatenate(edges) if edges else np.zeros((0, 2), np.int64)
         t = np.concatenate(types) if types else np.zeros(0, np.int64)
-        # periodic wrap on a width-2 (or height-2) torus meets the same pair twice: keep one
-        e, first = np.unique(e, axis=0, return_index=True)
-        t = t[first]
+        if self.periodic and min(H, W) <= 2 * max(max(abs(a), abs(b)) for a, b in self.offsets):
+            # a wrap on a narrow torus can meet the same pair twice: keep one
+            e, first = np.unique(e, axis=0, return_index=True)
+            t = t[first]
         colours = self._colouring(H, W)
         if colours is not None and np.any(colours[e[:, 0]] == colours[e[:, 1]]):
             colours = None  # e.g. a periodic lattice of odd size: fall back to greedy

@@ -21,7 +21,7 @@ What the Model contract (:mod:`mrfpe.models.base`) promises and the checks verif
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -77,11 +77,13 @@ def check_model_errors(model: Any, data: Any, **_: Any) -> None:
 
 
 def check_model_targets(model: Any, data: Any, *, estimators: Sequence[str] | None = None,
-                        rtol: float = 1e-9, **_: Any) -> None:
+                        rtol: float = 1e-9, options: Mapping[str, Any] | None = None,
+                        **_: Any) -> None:
     """Every chosen estimator's target passes :func:`mrfpe.testing.check_target`."""
+    opts = dict(options or {})
     for e in _chosen(model, estimators):
         try:
-            target = model.target(e, data)
+            target = model.target(e, data, **opts)
         except Exception as exc:
             raise _fail(model, "check_model_targets", f"target({e!r}, data) raised "
                         f"{type(exc).__name__}: {exc}") from exc
@@ -92,19 +94,21 @@ def check_model_targets(model: Any, data: Any, *, estimators: Sequence[str] | No
 
 
 def check_model_codings(model: Any, data: Any, *, estimators: Sequence[str] | None = None,
-                        rtol: float = 1e-9, shape: Any = None, **_: Any) -> str:
+                        rtol: float = 1e-9, shape: Any = None,
+                        options: Mapping[str, Any] | None = None, **_: Any) -> str:
     """The codings' log_probs sum to the PL's; single-node blocks equal the PL."""
+    opts = dict(options or {})
     est = _chosen(model, estimators)
     if "pl" not in est:
         return "skipped"
-    pl = model.target("pl", data)
+    pl = model.target("pl", data, **opts)
     theta = _inside(pl, 7, 3)
     want = pl.log_prob(theta)
     done = False
     if "coding" in est:
         shape = np.shape(data)[-2:] if shape is None else shape
         k = model.n_codings(shape)
-        total = sum(model.target("coding", data, coding=c).log_prob(theta) for c in range(k))
+        total = sum(model.target("coding", data, coding=c, **opts).log_prob(theta) for c in range(k))
         if not np.all(_close(total, want, rtol)):
             raise _fail(model, "check_model_codings", f"the {k} codings sum to "
                         f"{np.asarray(total)[:3].tolist()}, the PL is {want[:3].tolist()}")
@@ -114,7 +118,7 @@ def check_model_codings(model: Any, data: Any, *, estimators: Sequence[str] | No
         single = (1, 1) if np.ndim(data) >= 2 and getattr(model, "graph_spec", None) is not \
             None and hasattr(model.graph_spec, "offsets") else 1
         if one:
-            got = model.target("block", data, block=single).log_prob(theta)
+            got = model.target("block", data, block=single, **opts).log_prob(theta)
             if not np.all(_close(got, want, rtol)):
                 raise _fail(model, "check_model_codings", f"block pseudolikelihood with "
                             f"single-node blocks gives {got[:3].tolist()}, the PL "
@@ -123,15 +127,18 @@ def check_model_codings(model: Any, data: Any, *, estimators: Sequence[str] | No
     return "passed" if done else "skipped"
 
 
-def check_model_simulate(model: Any, data: Any, *, theta: Any = None, **_: Any) -> str:
+def check_model_simulate(model: Any, data: Any, *, theta: Any = None,
+                         options: Mapping[str, Any] | None = None, **_: Any) -> str:
     """``simulate`` returns the data's shape and is reproducible from ``seed``."""
     sim = getattr(model, "simulate", None)
     if sim is None or theta is None:
         return "skipped"
     shape = np.shape(data)[-2:] if getattr(model, "graph_spec", None) is not None and \
         hasattr(model.graph_spec, "offsets") else None
-    a = model.simulate(theta, shape=shape, n=2, seed=11)
-    b = model.simulate(theta, shape=shape, n=2, seed=11)
+    cov = {"covariates": options["covariates"]} if options and options.get("covariates") \
+        is not None else {}
+    a = model.simulate(theta, shape=shape, n=2, seed=11, **cov)
+    b = model.simulate(theta, shape=shape, n=2, seed=11, **cov)
     one = np.shape(data)[-(len(np.shape(a)) - 1):]
     if np.shape(a)[1:] != one or np.shape(a)[0] != 2:
         raise _fail(model, "check_model_simulate", f"simulate(n=2) must return (2, "
@@ -152,7 +159,7 @@ MODEL_CHECKS: dict[str, Callable[..., Any]] = {
 
 
 def check_model(model: Any, data: Any, *, estimators: Sequence[str] | None = None,
-                theta: Any = None, rtol: float = 1e-9,
+                theta: Any = None, rtol: float = 1e-9, options: Mapping[str, Any] | None = None,
                 skip: tuple[str, ...] = ()) -> dict[str, str]:
     """Run every model check on ``data``; return ``{check: "passed" | "skipped"}``.
 
@@ -164,6 +171,7 @@ def check_model(model: Any, data: Any, *, estimators: Sequence[str] | None = Non
         where the data are too large for it).
     theta : parameters for the simulator check (skipped without).
     rtol : tolerance of the sum identities.
+    options : further options passed to every ``target`` call (e.g. ``covariates``).
     skip : names of :data:`MODEL_CHECKS` not to run.
 
     Raises
@@ -187,7 +195,8 @@ def check_model(model: Any, data: Any, *, estimators: Sequence[str] | None = Non
         def check() -> str:
             if name in skip:
                 return "skipped"
-            out = fn(model, data, estimators=estimators, rtol=rtol, theta=theta)
+            out = fn(model, data, estimators=estimators, rtol=rtol, theta=theta,
+                     options=options)
             return out or "passed"
         return check
 

@@ -1,0 +1,219 @@
+"""Declared models (:mod:`mrfpe.models`): simulation speed; pseudolikelihood rows to come.
+
+Every comparison is a **ratio in one run**: the two sides alternate and the
+medians of several repeats are compared, so a shared, noisy machine slows both
+alike.
+
+* ``gibbs``: Gibbs site updates per second of :func:`mrfpe.models.simulate.simulate`
+  (numba, colour classes, counter-based uniforms) against a plain vectorised NumPy
+  checkerboard sweep (:func:`numpy_gibbs`, the sweep of
+  :func:`mrfpe.targets.potts.gibbs_sample`: neighbour counts, softmax, inverse CDF)
+  on a 512 x 512 Ising model (q = 2, 4-neighbour), numba on one thread (against the
+  single-threaded NumPy sweep) and with the threads the library takes by default
+  (``thread_budget``: a second thread from ~1.6e6 site-states per sweep, so at 512²
+  Ising still one). Sweep cost is ``(t(K sweeps) - t(0 sweeps)) / K``: the one-off
+  setup (tables, CSR, colouring) is reported apart;
+* ``growth``: the same, one thread, over lattice size (64² ... 2048², q = 2) and
+  states (q = 2, 4, 8, 16 at 256²);
+* ``swendsen_wang``: Swendsen-Wang and Gibbs sweeps per second (one thread), Potts
+  512² at the critical coupling ``log(1 + sqrt(q))``.
+
+Hooks: each measurement is a function ``(quick) -> markdown lines`` in
+:data:`MEASUREMENTS`; pseudolikelihood-evaluation rows go in as one more entry
+(e.g. ``"pl": pl_rows``). :func:`run` takes the part names.
+
+Usage (from the repository root)::
+
+    python -m benchmarks.bench_models                     # every part, appended to RESULTS.md
+    python -m benchmarks.bench_models --parts gibbs --no-write
+    python -m benchmarks.bench_models --quick --no-write  # small sizes: checks that it runs
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from benchmarks._common import append_results, command_line, machine
+
+
+def numpy_gibbs(x: np.ndarray, J: float, h: np.ndarray, n_sweeps: int,
+                rng: np.random.Generator) -> None:
+    """Reference: ``n_sweeps`` vectorised NumPy checkerboard sweeps of ``x`` (H, W) in place.
+
+    Potts ``J [x_i = x_j] + h[x_i]`` on the free-boundary 4-neighbour lattice, each half
+    sweep drawing one colour from ``p(a) ∝ exp(J n_i(a) + h_a)`` by inverse CDF.
+    """
+    H, W = x.shape
+    q = h.size
+    colour = np.add.outer(np.arange(H), np.arange(W)) % 2
+    masks = (colour == 0, colour == 1)
+    states = np.arange(q)
+    for _ in range(n_sweeps):
+        for m in masks:
+            oh = x[..., None] == states  # (H, W, q) one-hot
+            n = np.zeros((H, W, q))
+            n[1:] += oh[:-1]
+            n[:-1] += oh[1:]
+            n[:, 1:] += oh[:, :-1]
+            n[:, :-1] += oh[:, 1:]
+            logits = J * n[m] + h
+            logits -= logits.max(axis=1, keepdims=True)
+            cdf = np.cumsum(np.exp(logits), axis=1)
+            u = rng.random(cdf.shape[0]) * cdf[:, -1]
+            x[m] = np.minimum((u[:, None] >= cdf).sum(axis=1), q - 1)
+
+
+def _potts(shape: tuple[int, int], q: int, J: float, field: float = 0.1):
+    """Design and psi of Potts ``J [x_i = x_j]`` + field ``h_a = field * a / q`` (a >= 1)."""
+    from mrfpe.models.discrete import MRF
+    from mrfpe.models.graph import lattice
+    from mrfpe.models.terms import Coupling, Field
+
+    design, _, _ = MRF(lattice(4), q, [Coupling(), Field()]).compile(shape)
+    h = field * np.arange(q) / q
+    return design, design.psi(np.array([[J, *h[1:]]]))[0], h
+
+
+def _timed(fn: Callable[[], object]) -> float:
+    t0 = time.perf_counter()
+    fn()
+    return time.perf_counter() - t0
+
+
+def simulate_rates(design, psi, method: str, n_sweeps: int, repeat: int,
+                   threads: int | None = None) -> dict:
+    """Median seconds per sweep (setup excluded) and of the setup alone."""
+    import numba
+
+    from mrfpe.models.simulate import simulate
+    from mrfpe.threads import limit_threads
+
+    def call(k):
+        with limit_threads(threads or numba.get_num_threads()):
+            return _timed(lambda: simulate(design, psi, 1, seed=0, method=method,
+                                           n_sweeps=k))
+
+    call(1)  # load or compile the kernel
+    setup = [call(0) for _ in range(repeat)]
+    total = [call(n_sweeps) for _ in range(repeat)]
+    s0 = float(np.median(setup))
+    return {"sweep_s": max(float(np.median(total)) - s0, 1e-12) / n_sweeps, "setup_s": s0}
+
+
+def numpy_rate(shape, q, J, h, n_sweeps) -> float:
+    """Seconds per sweep of :func:`numpy_gibbs`."""
+    rng = np.random.default_rng(0)
+    x = rng.integers(0, q, size=shape)
+    return _timed(lambda: numpy_gibbs(x, J, h, n_sweeps, rng)) / n_sweeps
+
+
+def gibbs_vs_numpy(quick: bool = False) -> list[str]:
+    """The headline: numba Gibbs against the NumPy sweep, 512² Ising, alternated."""
+    import numba
+
+    shape = (128, 128) if quick else (512, 512)
+    n_sites = shape[0] * shape[1]
+    repeat, k_numba, k_numpy = (2, 20, 2) if quick else (5, 50, 4)
+    design, psi, h = _potts(shape, 2, 0.6)
+    threads = numba.get_num_threads()
+    times: dict[str, list[float]] = {"numpy": [], "numba_1": [], f"numba_{threads}": []}
+    setup = []
+    for _ in range(repeat):
+        times["numpy"].append(numpy_rate(shape, 2, 0.6, h, k_numpy))
+        for t in (1, threads):
+            r = simulate_rates(design, psi, "gibbs", k_numba, 1, t)
+            times[f"numba_{t}"].append(r["sweep_s"])
+            setup.append(r["setup_s"])
+    med = {k: float(np.median(v)) for k, v in times.items()}
+    rows = [f"Gibbs, Ising {shape[0]}² (q = 2, 4-neighbour, J = 0.6, field 0.05): medians of "
+            f"{repeat} alternated repeats; simulate's setup {np.median(setup):.3f} s excluded.\n",
+            "| sampler | threads | site updates/s | ns/site | ÷ NumPy time |",
+            "|---|---|---|---|---|"]
+    for k, label, thr in (("numpy", "NumPy checkerboard (reference)", "1"),
+                          ("numba_1", "mrfpe.models.simulate gibbs", "1"),
+                          (f"numba_{threads}", "mrfpe.models.simulate gibbs",
+                           f"default (≤ {threads})")):
+        if k == f"numba_{threads}" and threads == 1:
+            continue
+        rows.append(f"| {label} | {thr} | {n_sites / med[k]:.3g} | "
+                    f"{med[k] / n_sites * 1e9:.2f} | {med['numpy'] / med[k]:.1f}× |")
+        print(rows[-1], flush=True)
+    return rows
+
+
+def growth(quick: bool = False) -> list[str]:
+    """Site updates per second over lattice size and number of states."""
+    sizes = (32, 64) if quick else (64, 256, 1024, 2048)
+    states = (2, 4) if quick else (2, 4, 8, 16)
+    base = 32 if quick else 256
+    rows = ["", "| growth (1 thread) | nodes | q | numba site updates/s | ns/site "
+            "| setup s | NumPy ns/site | NumPy ÷ numba time |", "|---|---|---|---|---|---|---|---|"]
+    cases = [("size", s, 2) for s in sizes] + [("states", base, q) for q in states[1:]]
+    for what, side, q in cases:
+        n_sites = side * side
+        design, psi, h = _potts((side, side), q, 0.6)
+        k = max(4, min(100, int(3e7 // (n_sites * q))))
+        r = simulate_rates(design, psi, "gibbs", k, 3 if n_sites <= 1 << 20 else 1, threads=1)
+        k_np = max(1, min(10, int(3e6 // (n_sites * q))))
+        npt = numpy_rate((side, side), q, 0.6, h, k_np)
+        rows.append(f"| {what} | {side}² | {q} | {n_sites / r['sweep_s']:.3g} | "
+                    f"{r['sweep_s'] / n_sites * 1e9:.2f} | {r['setup_s']:.2f} | "
+                    f"{npt / n_sites * 1e9:.1f} | {npt / r['sweep_s']:.1f}× |")
+        print(rows[-1], flush=True)
+    return rows
+
+
+def swendsen_wang_rates(quick: bool = False) -> list[str]:
+    """Swendsen-Wang against Gibbs sweeps per second at the critical Potts coupling."""
+    side = 128 if quick else 512
+    rows = ["", f"| Potts {side}², J = log(1 + √q), 1 thread | q | Swendsen-Wang sweeps/s | "
+            "Gibbs sweeps/s | SW ns/site |", "|---|---|---|---|---|"]
+    for q in (2, 4):
+        design, psi, _ = _potts((side, side), q, float(np.log1p(np.sqrt(q))), field=0.0)
+        sw = simulate_rates(design, psi, "swendsen_wang", 10 if quick else 30, 3, threads=1)
+        gb = simulate_rates(design, psi, "gibbs", 10 if quick else 30, 3, threads=1)
+        rows.append(f"| critical | {q} | {1 / sw['sweep_s']:.1f} | {1 / gb['sweep_s']:.1f} | "
+                    f"{sw['sweep_s'] / side**2 * 1e9:.1f} |")
+        print(rows[-1], flush=True)
+    return rows
+
+
+#: The suite's measurements, in order: name -> ``(quick) -> markdown lines``.
+MEASUREMENTS: dict[str, Callable[[bool], list[str]]] = {
+    "gibbs": gibbs_vs_numpy,
+    "growth": growth,
+    "swendsen_wang": swendsen_wang_rates,
+}
+
+
+def run(quick: bool = False, parts: tuple[str, ...] = tuple(MEASUREMENTS)) -> list[str]:
+    """The markdown body of the suite (``parts``: names in :data:`MEASUREMENTS`)."""
+    body: list[str] = []
+    for name in parts:
+        body += MEASUREMENTS[name](quick)
+    return body
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p.add_argument("--quick", action="store_true")
+    p.add_argument("--no-write", action="store_true", help="do not append to RESULTS.md")
+    p.add_argument("--parts", nargs="+", choices=list(MEASUREMENTS), default=list(MEASUREMENTS))
+    args = p.parse_args(argv)
+    info = machine()
+    print(" ".join(f"{k}={v}" for k, v in info.items()), flush=True)
+    t0 = time.perf_counter()
+    body = run(args.quick, tuple(args.parts))
+    body.append(f"\nSuite time: {time.perf_counter() - t0:.0f} s.")
+    if not args.no_write:
+        append_results("bench_models: simulation" + (" (quick)" if args.quick else ""),
+                       command_line(argv, "benchmarks.bench_models"), info, body)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

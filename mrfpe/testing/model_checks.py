@@ -108,7 +108,8 @@ def check_model_codings(model: Any, data: Any, *, estimators: Sequence[str] | No
     if "coding" in est:
         shape = np.shape(data)[-2:] if shape is None else shape
         k = model.n_codings(shape)
-        total = sum(model.target("coding", data, coding=c, **opts).log_prob(theta) for c in range(k))
+        total = sum(model.target("coding", data, coding=c, **opts).log_prob(theta)
+                    for c in range(k))
         if not np.all(_close(total, want, rtol)):
             raise _fail(model, "check_model_codings", f"the {k} codings sum to "
                         f"{np.asarray(total)[:3].tolist()}, the PL is {want[:3].tolist()}")

@@ -55,7 +55,7 @@ def test_check_model_catches_a_broken_model():
 def test_model_plugins_are_validated():
     with pytest.raises(TypeError, match="no arguments"):
         validate_model(lambda shape: None)
-    with pytest.raises(TypeError, match="not an mrfpe.models.Model"):
+    with pytest.raises(TypeError, match=r"not an mrfpe\.models\.Model"):
         validate_model(int)
     models.registry.register("not_a_model", lambda: 3)
     try:

@@ -20,7 +20,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from benchmarks import bench_kernel, bench_samplers, bench_stereo, bench_targets
+from benchmarks import bench_kernel, bench_models, bench_samplers, bench_stereo, bench_targets
 from benchmarks._common import append_results, command_line, machine
 
 
@@ -60,7 +60,11 @@ def _kernel(quick: bool) -> tuple[str, list[str]]:
     return "lean vs classic kernel (issue 14)", bench_kernel.run(quick)
 
 
-SUITE_RUNNERS = {"kernel": _kernel, "targets": _targets, "samplers": _samplers, "stereo": _stereo}
+def _models(quick: bool) -> tuple[str, list[str]]:
+    return "declared models: simulation and pseudolikelihood", bench_models.run(quick)
+
+
+SUITE_RUNNERS = {"models": _models, "kernel": _kernel, "targets": _targets, "samplers": _samplers, "stereo": _stereo}
 SUITES = tuple(SUITE_RUNNERS)
 
 

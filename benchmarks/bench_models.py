@@ -1,4 +1,4 @@
-"""Declared models (:mod:`mrfpe.models`): simulation speed; pseudolikelihood rows to come.
+"""Declared models (:mod:`mrfpe.models`): simulation and pseudolikelihood speed.
 
 Every comparison is a **ratio in one run**: the two sides alternate and the
 medians of several repeats are compared, so a shared, noisy machine slows both
@@ -18,9 +18,12 @@ alike.
 * ``swendsen_wang``: Swendsen-Wang and Gibbs sweeps per second (one thread), Potts
   512² at the critical coupling ``log(1 + sqrt(q))``.
 
-Hooks: each measurement is a function ``(quick) -> markdown lines`` in
-:data:`MEASUREMENTS`; pseudolikelihood-evaluation rows go in as one more entry
-(e.g. ``"pl": pl_rows``). :func:`run` takes the part names.
+* ``pl``: pseudolikelihood evaluation against a float64 GEMM of the same shape,
+  over lattice size and states, with the build's time and peak memory
+  (:func:`pl_rows`).
+
+Each measurement is a function ``(quick) -> markdown lines`` in
+:data:`MEASUREMENTS`; :func:`run` takes the part names.
 
 Usage (from the repository root)::
 
@@ -182,11 +185,74 @@ def swendsen_wang_rates(quick: bool = False) -> list[str]:
     return rows
 
 
+def _median_alternated(fns: list[Callable[[], object]], repeat: int) -> list[float]:
+    """Median wall time of each function, the functions alternated ``repeat`` times."""
+    times: list[list[float]] = [[] for _ in fns]
+    for _ in range(repeat):
+        for k, fn in enumerate(fns):
+            times[k].append(_timed(fn))
+    return [float(np.median(t)) for t in times]
+
+
+def pl_rows(quick: bool = False) -> list[str]:
+    """PL evaluation against a float64 GEMM of the same shape; growth; build memory.
+
+    The log-linear PL of a batch of N parameter vectors is ``(R (q-1), P) @ (P, N)``
+    over the R distinct conditional rows (differences to the observed state), then
+    a log-sum-exp over the states: the GEMM of that shape is its floor. ``ns/(row·state·θ)`` divides by the rows
+    actually evaluated; ``ns/(node·state·θ)`` by the lattice's nodes (what the
+    distinct-row reduction saves). Covariates make every row distinct (R = nodes).
+    """
+    from benchmarks._common import peak_memory
+    from mrfpe import models
+
+    N = 64 if quick else 256
+    sides = (64, 128) if quick else (64, 256, 1024, 2048)
+    states = (2, 4) if quick else (2, 4, 8, 16)
+    rng = np.random.default_rng(0)
+    rows = ["", "**Pseudolikelihood evaluation** (`model.target(\"pl\", x).log_prob` of N = "
+            f"{N} parameter vectors; medians of alternated repeats, the GEMM "
+            "`(R·(q-1), P) @ (P, N)` of the same shape beside it)", "",
+            "| model | lattice | q | distinct rows R | build s | build peak MiB (traced) | "
+            "PL ms | GEMM ms | PL ÷ GEMM | ns/(row·state·θ) | ns/(node·state·θ) |",
+            "|---|---|---|---|---|---|---|---|---|---|---|"]
+    cases = [("potts", s, 2) for s in sides] + [("potts", 256, q) for q in states[1:]]
+    cases.append(("autologistic + covariate", 128 if quick else 256, 2))
+    for name, side, q in cases:
+        if name == "potts":
+            m = models.potts(q, 4)
+            x = rng.integers(0, q, (side, side))
+            opts: dict = {}
+            th = np.column_stack([rng.uniform(0, 1, N), rng.uniform(-1, 1, (N, q - 1))])
+        else:
+            m = models.autologistic(["z"])
+            x = rng.integers(0, 2, (side, side))
+            opts = {"covariates": {"z": rng.normal(size=(side, side))}}
+            th = rng.uniform(-0.5, 0.5, (N, 3))
+        t0 = time.perf_counter()
+        with peak_memory() as mem:
+            t = m.target("pl", x, **opts)
+        build = time.perf_counter() - t0
+        R = t.n_rows
+        G = t.rows[0].D.reshape(-1, t.rows[0].D.shape[-1])  # (R (q-1), P): what the PL multiplies
+        psi = np.ascontiguousarray(th.T)
+        pl_s, gemm_s = _median_alternated([lambda t=t: t.log_prob(th),
+                                           lambda G=G, psi=psi: G @ psi], 3 if quick else 7)
+        denom_rows, denom_nodes = R * q * N, side * side * q * N
+        rows.append(f"| {name} | {side}² | {q} | {R} | {build:.2f} | "
+                    f"{mem.get('traced_MiB', float('nan')):.0f} | {pl_s * 1e3:.2f} | "
+                    f"{gemm_s * 1e3:.3f} | {pl_s / gemm_s:.1f} | "
+                    f"{pl_s / denom_rows * 1e9:.2f} | {pl_s / denom_nodes * 1e9:.4f} |")
+        print(rows[-1], flush=True)
+    return rows
+
+
 #: The suite's measurements, in order: name -> ``(quick) -> markdown lines``.
 MEASUREMENTS: dict[str, Callable[[bool], list[str]]] = {
     "gibbs": gibbs_vs_numpy,
     "growth": growth,
     "swendsen_wang": swendsen_wang_rates,
+    "pl": pl_rows,
 }
 
 
@@ -210,7 +276,7 @@ def main(argv: list[str] | None = None) -> int:
     body = run(args.quick, tuple(args.parts))
     body.append(f"\nSuite time: {time.perf_counter() - t0:.0f} s.")
     if not args.no_write:
-        append_results("bench_models: simulation" + (" (quick)" if args.quick else ""),
+        append_results("declared models" + (" (quick)" if args.quick else ""),
                        command_line(argv, "benchmarks.bench_models"), info, body)
     return 0
 

@@ -30,7 +30,6 @@ does not grow with the lattice.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -63,11 +62,15 @@ def unique_rows(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return first.astype(np.int64), counts.astype(np.int64), inverse.reshape(-1).astype(np.int64)
 
 
-@dataclass(frozen=True)
 class ConditionalRows:
     """Rows of a composite likelihood ``sum_r w_r log softmax(G_r psi)[obs_r]``.
 
-    Attributes
+    Kept as the differences ``D_r = G_r[k] - G_r[obs_r]`` over the ``K - 1``
+    alternatives other than the observed one, so that a row's term is
+    ``-log(1 + sum_k exp(D_rk . psi))``: one GEMM of ``(R (K-1), P) @ (P, N)``
+    and no gather (a softplus for ``K = 2``).
+
+    Parameters
     ----------
     G : ndarray (R, K, P)
         Per row, the design of each of its ``K`` alternatives (states of a node,
@@ -78,36 +81,50 @@ class ConditionalRows:
         How many times the row occurs.
     """
 
-    G: np.ndarray
-    obs: np.ndarray
-    weight: np.ndarray
+    def __init__(self, G: np.ndarray, obs: np.ndarray, weight: np.ndarray) -> None:
+        G = np.asarray(G, dtype=np.float64)
+        R, K, P = G.shape
+        obs = np.asarray(obs, dtype=np.int64)
+        others = np.arange(K)[None, :] != obs[:, None]  # (R, K)
+        D = G[others].reshape(R, K - 1, P) - G[np.arange(R), obs][:, None, :]
+        self.D = np.ascontiguousarray(D)
+        self.obs = obs
+        self.weight = np.asarray(weight, dtype=np.float64)
+        self.n_alternatives = K
+        for arr in (self.D, self.obs, self.weight):
+            arr.setflags(write=False)
 
     @property
     def n_rows(self) -> int:
-        return int(self.G.shape[0])
+        return int(self.D.shape[0])
 
 
 def softmax_rows_log_prob(groups: Sequence[ConditionalRows], psi: np.ndarray,
                           chunk: int = 1 << 15) -> np.ndarray:
-    """``sum_groups sum_r w_r (E_r[obs_r] - logsumexp_k E_r[k])``, ``E_r = G_r psi``; (N,).
+    """``sum_groups sum_r w_r log softmax(G_r psi)[obs_r]`` (N,), from the differences ``D``.
 
-    One GEMM per chunk of rows: ``(rows * K, P) @ (P, N)``.
+    ``log softmax(G psi)[obs] = -log(1 + sum_k exp(D_k . psi))``, evaluated stably
+    (``m = max(0, max_k D_k . psi)``) with one GEMM per chunk of rows.
     """
     psi = np.asarray(psi, dtype=np.float64)
     n = psi.shape[0]
     out = np.zeros(n)
+    psiT = np.ascontiguousarray(psi.T)
     for g in groups:
-        R, K, P = g.G.shape
-        step = max(1, chunk // max(K, 1))
+        R, K1, P = g.D.shape
+        if K1 == 0:
+            continue
+        step = max(1, chunk // K1)
         for a in range(0, R, step):
-            G = g.G[a:a + step]
-            r = G.shape[0]
-            E = (G.reshape(r * K, P) @ psi.T).reshape(r, K, n)
-            own = E[np.arange(r), g.obs[a:a + step]]  # (r, N)
-            m = E.max(axis=1)
-            m = np.where(np.isfinite(m), m, 0.0)
-            lse = m + np.log(np.exp(E - m[:, None, :]).sum(axis=1))
-            out += g.weight[a:a + step] @ (own - lse)
+            D = g.D[a:a + step]
+            r = D.shape[0]
+            d = (D.reshape(r * K1, P) @ psiT).reshape(r, K1, n)
+            if K1 == 1:
+                lse = np.logaddexp(0.0, d[:, 0])
+            else:
+                m = np.maximum(d.max(axis=1), 0.0)
+                lse = m + np.log(np.exp(-m) + np.exp(d - m[:, None, :]).sum(axis=1))
+            out -= g.weight[a:a + step] @ lse
     return out
 
 

@@ -125,7 +125,7 @@ class ConditionalTarget(ModelTarget):
         return sum(g.n_rows for g in self.rows)
 
     def _row_bytes(self) -> float:
-        return 8.0 * 3 * min(sum(g.n_rows * g.G.shape[1] for g in self.rows), 1 << 15)
+        return 8.0 * 3 * min(sum(g.n_rows * g.n_alternatives for g in self.rows), 1 << 15)
 
     def _log_prob(self, theta: np.ndarray) -> np.ndarray:
         return softmax_rows_log_prob(self.rows, self.design.psi(theta))

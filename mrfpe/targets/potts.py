@@ -51,7 +51,6 @@ __all__ = [
     "PottsExactLikelihood",
     "PottsPseudoLikelihood",
     "gibbs_sample",
-    "neighbour_counts",
     "param_names",
     "sufficient_statistics",
 ]
@@ -123,18 +122,6 @@ POTTS_OPTIONS: tuple[Option, ...] = (
     Option("bounds", "(q, 2) array | None", None, optional(_check_bounds_value),
            "sampling-space bounds of (coupling, fields); default [-2, 2] and [-3, 3]"),
 )
-
-
-def neighbour_counts(x: np.ndarray, n_states: int) -> np.ndarray:
-    """``n_i(a)``: first-order neighbours of each site in each state, (M, H, W, q)."""
-    x = np.asarray(x)
-    onehot = (x[..., None] == np.arange(n_states)).astype(np.int64)
-    out = np.zeros_like(onehot)
-    out[:, 1:] += onehot[:, :-1]
-    out[:, :-1] += onehot[:, 1:]
-    out[:, :, 1:] += onehot[:, :, :-1]
-    out[:, :, :-1] += onehot[:, :, 1:]
-    return out
 
 
 def sufficient_statistics(x: Any, n_states: int) -> np.ndarray:
@@ -212,9 +199,10 @@ def gibbs_sample(theta: Any, shape: tuple[int, int], n_states: int = 2, *, n_sam
                  init: Any = "random") -> np.ndarray:
     """Draw Potts/Ising configurations at known parameters by Gibbs sampling.
 
-    Checkerboard sweeps: the sites of one colour are conditionally independent
-    given the other colour (first-order neighbourhood), so each half-sweep
-    draws all of them at once from ``p(x_i = a | x_N_i) ∝ exp(J n_i(a) + h_a)``.
+    The short form of ``mrfpe.models.potts(n_states, 4).simulate(theta, shape,
+    n=n_samples, method="gibbs", ...)``: checkerboard sweeps in numba (the
+    sites of one colour are conditionally independent given the other colour),
+    each drawing ``p(x_i = a | x_N_i) ∝ exp(J n_i(a) + h_a)``.
 
     Parameters
     ----------
@@ -235,52 +223,16 @@ def gibbs_sample(theta: Any, shape: tuple[int, int], n_states: int = 2, *, n_sam
     -------
     (n_samples, H, W) int64
     """
+    from mrfpe.models.library import potts
+
     q = _check_states(n_states)
     th = np.asarray(theta, dtype=np.float64).reshape(-1)
     if th.shape != (q,) or not np.all(np.isfinite(th)):
         raise ValueError(f"theta must be {q} finite numbers {param_names(q)}; got "
                          f"{np.asarray(theta).tolist()}")
-    try:
-        H, W = (int(s) for s in shape)
-    except (TypeError, ValueError):
-        raise ValueError(f"shape must be (H, W); got {shape!r}") from None
-    if H < 1 or W < 1:
-        raise ValueError(f"shape must be positive; got {shape!r}")
     for name, val, low in (("n_samples", n_samples, 1), ("n_sweeps", n_sweeps, 0),
                            ("thin", thin, 1)):
         if isinstance(val, bool) or not isinstance(val, int | np.integer) or val < low:
             raise ValueError(f"{name} must be an integer >= {low}; got {val!r}")
-    rng = np.random.default_rng(check_seed(seed))
-    if isinstance(init, str):
-        if init != "random":
-            raise ValueError(f"init must be 'random' or an (H, W) configuration; got {init!r}")
-        x = rng.integers(0, q, size=(H, W))
-    else:
-        x = _configs(init, q, "init")[0]
-        if x.shape != (1, H, W):
-            raise ValueError(f"init must have shape {(H, W)}; got {np.shape(init)}")
-        x = x[0].copy()
-    J = th[0]
-    h = np.concatenate([[0.0], th[1:]])
-    colour = (np.add.outer(np.arange(H), np.arange(W)) % 2).astype(bool)
-    masks = (~colour, colour)
-
-    def sweep(x: np.ndarray) -> None:
-        for m in masks:
-            n = neighbour_counts(x[None], q)[0][m]  # (n_m, q)
-            logits = J * n + h
-            logits -= logits.max(axis=1, keepdims=True)
-            p = np.exp(logits)
-            cdf = np.cumsum(p, axis=1)
-            u = rng.random(n.shape[0]) * cdf[:, -1]
-            x[m] = np.minimum((u[:, None] >= cdf).sum(axis=1), q - 1)
-
-    out = np.empty((int(n_samples), H, W), dtype=np.int64)
-    for _ in range(int(n_sweeps)):
-        sweep(x)
-    for s in range(int(n_samples)):
-        if s:
-            for _ in range(int(thin)):
-                sweep(x)
-        out[s] = x
-    return out
+    return potts(q, 4).simulate(th, shape, n=int(n_samples), seed=check_seed(seed),
+                                method="gibbs", n_sweeps=int(n_sweeps), thin=int(thin), init=init)

@@ -64,7 +64,8 @@ def _models(quick: bool) -> tuple[str, list[str]]:
     return "declared models: simulation and pseudolikelihood", bench_models.run(quick)
 
 
-SUITE_RUNNERS = {"models": _models, "kernel": _kernel, "targets": _targets, "samplers": _samplers, "stereo": _stereo}
+SUITE_RUNNERS = {"models": _models, "kernel": _kernel, "targets": _targets,
+                 "samplers": _samplers, "stereo": _stereo}
 SUITES = tuple(SUITE_RUNNERS)
 
 

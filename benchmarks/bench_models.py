@@ -234,9 +234,9 @@ def pl_rows(quick: bool = False) -> list[str]:
             t = m.target("pl", x, **opts)
         build = time.perf_counter() - t0
         R = t.n_rows
-        G = t.rows[0].D.reshape(-1, t.rows[0].D.shape[-1])  # (R (q-1), P): what the PL multiplies
+        G = t.rows[0].D.reshape(-1, t.rows[0].D.shape[-1])  # (R (q-1), P), as the PL's GEMM
         psi = np.ascontiguousarray(th.T)
-        pl_s, gemm_s = _median_alternated([lambda t=t: t.log_prob(th),
+        pl_s, gemm_s = _median_alternated([lambda t=t, th=th: t.log_prob(th),
                                            lambda G=G, psi=psi: G @ psi], 3 if quick else 7)
         denom_rows, denom_nodes = R * q * N, side * side * q * N
         rows.append(f"| {name} | {side}² | {q} | {R} | {build:.2f} | "

@@ -18,7 +18,8 @@ def test_benchmark_runner_quick():
                           cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
     out = proc.stdout
-    for heading in ("== targets ==", "== samplers ==", "== stereo ==", "| quarter | mrfpe"):
+    for heading in ("== models ==", "== targets ==", "== samplers ==", "== stereo ==",
+                    "| quarter | mrfpe", "| autologistic + covariate |"):
         assert heading in out
     assert "| ward | float64 | 10 |" in out  # a targets row with every column filled
     row = next(line for line in out.splitlines() if line.startswith("| ward | float64 | 10 |"))

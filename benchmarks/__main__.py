@@ -66,7 +66,6 @@ def _models(quick: bool) -> tuple[str, list[str]]:
 
 SUITE_RUNNERS = {"models": _models, "kernel": _kernel, "targets": _targets,
                  "samplers": _samplers, "stereo": _stereo}
-                 "samplers": _samplers, "stereo": _stereo}
 SUITES = tuple(SUITE_RUNNERS)
 
 

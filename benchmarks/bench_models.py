@@ -199,9 +199,10 @@ def pl_rows(quick: bool = False) -> list[str]:
 
     The log-linear PL of a batch of N parameter vectors is ``(R (q-1), P) @ (P, N)``
     over the R distinct conditional rows (differences to the observed state), then
-    a log-sum-exp over the states: the GEMM of that shape is its floor. ``ns/(row·state·θ)`` divides by the rows
-    actually evaluated; ``ns/(node·state·θ)`` by the lattice's nodes (what the
-    distinct-row reduction saves). Covariates make every row distinct (R = nodes).
+    a log-sum-exp over the states: the GEMM of that shape is its floor.
+    ``ns/(row·state·θ)`` divides by the rows actually evaluated;
+    ``ns/(node·state·θ)`` by the lattice's nodes (what the distinct-row reduction
+    saves). Covariates make every row distinct (R = nodes).
     """
     from benchmarks._common import peak_memory
     from mrfpe import models

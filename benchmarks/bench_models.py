@@ -18,6 +18,8 @@ alike.
 * ``swendsen_wang``: Swendsen-Wang and Gibbs sweeps per second (one thread), Potts
   512² at the critical coupling ``log(1 + sqrt(q))``.
 
+* ``posteriors``: the cost of a posterior over θ by raw exp(PL), the calibrated
+  pseudolikelihood and the exchange algorithm (:func:`posterior_costs`);
 * ``pl``: pseudolikelihood evaluation against a float64 GEMM of the same shape,
   over lattice size and states, with the build's time and peak memory
   (:func:`pl_rows`).
@@ -248,12 +250,61 @@ def pl_rows(quick: bool = False) -> list[str]:
     return rows
 
 
+def posterior_costs(quick: bool = False) -> list[str]:
+    """Cost of a posterior over θ: raw exp(PL), the calibrated PL, the exchange algorithm.
+
+    One Ising data set per lattice size at the coupling 0.3 (spin convention, no
+    field); each method with its defaults, PMC on the two PL targets. Simulation
+    sweeps are the model simulator's sweeps over the whole lattice (the build of
+    ``pl_adjusted``: pilot, Fisher information and MCMC-MLE rounds; exchange: the
+    auxiliary chains of every step, ``n_steps x n_chains x aux_sweeps``, plus its
+    two pilot runs).
+    """
+    import json
+    import warnings
+
+    import mrfpe
+    from mrfpe import models
+
+    sides = (16,) if quick else (16, 32, 64)
+    rows = ["", "**Cost of a posterior over θ** (Ising, coupling 0.3; defaults; PMC on the "
+            "PL targets)", "",
+            "| lattice | raw PL + PMC s | pl_adjusted build s | + PMC s | sweeps (build) | "
+            "exchange s | sweeps (exchange) | exchange ÷ raw PL |",
+            "|---|---|---|---|---|---|---|---|"]
+    m = models.ising()
+    for side in sides:
+        x = m.simulate([0.3, 0.0], shape=(side, side), seed=side, n_sweeps=300)
+        cfg = {"n_steps": 400, "burn_in": 100} if quick else {}
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # a quick run's short chains say so; timed anyway
+            t0 = time.perf_counter()
+            mrfpe.sample("pmc", m.target("pl", x), seed=0)
+            raw = time.perf_counter() - t0
+            t0 = time.perf_counter()
+            adj = m.target("pl_adjusted", x)
+            build = time.perf_counter() - t0
+            t0 = time.perf_counter()
+            mrfpe.sample("pmc", adj, seed=0)
+            adj_pmc = time.perf_counter() - t0
+            t0 = time.perf_counter()
+            post = mrfpe.sample("exchange", m.target("likelihood", x), seed=0, **cfg)
+            ex = time.perf_counter() - t0
+        c = json.loads(post.attrs["config"])
+        sweeps = int(c["n_steps"] * c["n_chains"] * post.attrs["aux_sweeps"])
+        rows.append(f"| {side}² | {raw:.2f} | {build:.2f} | {adj_pmc:.2f} | "
+                    f"{adj.n_simulation_sweeps} | {ex:.1f} | ≥ {sweeps} | {ex / raw:.0f} |")
+        print(rows[-1], flush=True)
+    return rows
+
+
 #: The suite's measurements, in order: name -> ``(quick) -> markdown lines``.
 MEASUREMENTS: dict[str, Callable[[bool], list[str]]] = {
     "gibbs": gibbs_vs_numpy,
     "growth": growth,
     "swendsen_wang": swendsen_wang_rates,
     "pl": pl_rows,
+    "posteriors": posterior_costs,
 }
 
 

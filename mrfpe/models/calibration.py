@@ -86,13 +86,23 @@ def simulate_draws(lik: Any, theta: Any, n_draws: int, *, seed: int) -> Draws:
     return Draws(th, np.asarray(y), tau, burn, thin)
 
 
-def _log_f(lik: Any, theta: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """``log f(y_k | θ_j)`` (N, K) for a batch of θ and draws of one configuration each."""
+def _log_f_of(lik: Any, y: np.ndarray) -> Any:
+    """``theta (N, d) -> log f(y_k | θ_j)`` (N, K) for draws ``y`` of one configuration each.
+
+    For a design model the draws' sufficient statistics are computed once, so each
+    call is one matrix product.
+    """
     stats = getattr(lik, "sufficient_statistics", None)
     design = getattr(lik, "design", None)
     if callable(stats) and design is not None:
-        return design.psi(theta) @ stats(y).T
-    return np.stack([lik.unnormalised(theta, yk[None]) for yk in y], axis=1)
+        S = stats(y).T
+        return lambda theta: design.psi(theta) @ S
+    return lambda theta: np.stack([lik.unnormalised(theta, yk[None]) for yk in y], axis=1)
+
+
+def _log_f(lik: Any, theta: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """``log f(y_k | θ_j)`` (N, K) for a batch of θ and draws of one configuration each."""
+    return _log_f_of(lik, y)(theta)
 
 
 def _scores(lik: Any, theta: np.ndarray, y: np.ndarray, h: np.ndarray) -> np.ndarray:
@@ -165,14 +175,15 @@ def mcmc_mle(lik: Any, theta0: Any, *, n_draws: int = 1000, max_iter: int = 10,
         draws = simulate_draws(lik, theta, n_draws, seed=int(rng.integers(2**63)))
         sims += draws.n_sweeps
         info = fisher_information(lik, draws)
-        lf0 = _log_f(lik, theta[None], draws.y)[0]
+        log_f = _log_f_of(lik, draws.y)
+        lf0 = log_f(theta[None])[0]
         lx0 = float(lik.log_prob(theta)[0])
 
         def neg(t: np.ndarray, lf0: np.ndarray = lf0, lx0: float = lx0,
-                y: np.ndarray = draws.y) -> float:
-            lw = _log_f(lik, t[None], y)[0] - lf0
+                log_f: Any = log_f) -> float:
+            lw = log_f(t[None])[0] - lf0
             ess = math.exp(2 * logsumexp(lw) - logsumexp(2 * lw))
-            if ess < y.shape[0] / 5:  # outside the trust region of these draws
+            if ess < lw.size / 5:  # outside the trust region of these draws
                 return 1e300
             return -(float(lik.log_prob(t)[0]) - lx0 - M * (logsumexp(lw) - math.log(lw.size)))
 

@@ -7,7 +7,8 @@ import mrfpe.samplers
 from mrfpe import cli
 from mrfpe import posterior as P
 
-BUILTINS = ["dw_q", "dw_r", "emcee", "lm_multiseed", "mh", "nlopt_multiseed", "pmc", "ppf", "sir"]
+BUILTINS = ["dw_q", "dw_r", "emcee", "exchange", "lm_multiseed", "mh", "nlopt_multiseed", "pmc",
+            "ppf", "sir"]
 
 
 def test_samplers_lists_every_registered_sampler(capsys):
@@ -22,6 +23,15 @@ def test_samplers_lists_every_registered_sampler(capsys):
     if not third_party:
         pytest.skip("no third-party sampler plugin installed (README installs plugins/*)")
     assert len(rows) >= 10
+
+
+def test_models_lists_every_registered_model(capsys):
+    from mrfpe import models
+
+    assert cli.main(["models"]) == 0
+    rows = [line.split()[0] for line in capsys.readouterr().out.splitlines()[2:] if line.strip()]
+    assert set(models.names()) <= set(rows)
+    assert {"potts", "ising", "autologistic", "autonormal", "brdf"} <= set(rows)
 
 
 @pytest.fixture(scope="module")

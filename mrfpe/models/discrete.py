@@ -29,9 +29,10 @@ import numpy as np
 from mrfpe.models.base import Model
 from mrfpe.models.design import FORBIDDEN, Design, check_configurations
 from mrfpe.models.graph import Graph, LatticeSpec, as_graph_spec
+from mrfpe.models.options import COMMON_OPTIONS, block_option, bounds_option, jsonable, nonneg_int
 from mrfpe.models.terms import EdgeCovariate, Term
 from mrfpe.targets.base import Target
-from mrfpe.targets.options import Option, choice_check, optional
+from mrfpe.targets.options import Option, choice_check
 from mrfpe.validation import check_positive_int
 
 __all__ = ["FORBIDDEN", "MRF", "Potential"]
@@ -64,72 +65,14 @@ class Potential:
             raise ValueError("Potential params must name at least one parameter")
 
 
-def _check_covariates(value: Any) -> dict[str, np.ndarray] | None:
-    if value is None:
-        return None
-    if not isinstance(value, Mapping):
-        raise ValueError(f"covariates must be a mapping name -> array; got "
-                         f"{type(value).__name__}")
-    return dict(value)
-
-
-def _covariates_option(name: str, value: Any) -> Any:
-    return _check_covariates(value)
-
-
-def _bounds_option(name: str, value: Any) -> Any:
-    try:
-        b = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a finite (d, 2) array; got {value!r}") from None
-    if b.ndim != 2 or b.shape[1] != 2 or not np.all(np.isfinite(b)) or np.any(b[:, 0] >= b[:, 1]):
-        raise ValueError(f"{name} must be a finite (d, 2) array with lower < upper; got "
-                         f"{np.asarray(value).tolist()}")
-    return b
-
-
-def _nonneg_int(name: str, value: Any) -> int:
-    return check_positive_int(name, value, minimum=0)
-
-
-def _block_option(name: str, value: Any) -> Any:
-    """A tile ``(bh, bw)`` (a tuple), a block size, a label per node, or a list of node arrays."""
-    if value is None:
-        return None
-    if isinstance(value, tuple):
-        if len(value) == 2 and all(isinstance(v, int | np.integer) and not isinstance(v, bool)
-                                   and v >= 1 for v in value):
-            return (int(value[0]), int(value[1]))
-        raise ValueError(f"{name} as a tuple must be a tile (bh, bw) of positive integers; "
-                         f"got {value!r}")
-    if isinstance(value, int | np.integer) and not isinstance(value, bool):
-        if value < 1:
-            raise ValueError(f"{name} as a block size must be >= 1; got {value!r}")
-        return int(value)
-    if isinstance(value, np.ndarray) and value.ndim == 1 and value.dtype.kind in "iu":
-        return value.astype(np.int64)  # a block label per node
-    if isinstance(value, list) and value:
-        if all(isinstance(v, int | np.integer) and not isinstance(v, bool) for v in value):
-            return np.asarray(value, dtype=np.int64)  # labels
-        if all(np.ndim(v) == 1 for v in value):
-            return [np.asarray(v, dtype=np.int64) for v in value]
-    raise ValueError(f"{name} must be a tile (bh, bw) on a lattice, a block size, a block label "
-                     f"per node, or a list of node-id arrays; got {value!r}")
-
-
-COMMON = (
-    Option("covariates", "mapping name -> array | None", None, _covariates_option,
-           "node covariates (n_nodes[, k]) or (H, W[, k]); edge covariates (n_edges[, k])"),
-    Option("bounds", "(d, 2) array | None", None, optional(_bounds_option),
-           "sampling-space bounds of theta (default: each term's)"),
-)
+COMMON = COMMON_OPTIONS
 
 ESTIMATOR_OPTIONS: dict[str, tuple[Option, ...]] = {
     "pl": COMMON,
-    "coding": (*COMMON, Option("coding", "int >= 0", 0, _nonneg_int,
+    "coding": (*COMMON, Option("coding", "int >= 0", 0, nonneg_int,
                                "which colour class (Besag coding) 0 .. n_codings - 1")),
     "block": (*COMMON, Option("block", "(bh, bw) | int | labels | list of arrays | None", None,
-                              _block_option,
+                              block_option,
                               "tiles (bh, bw) anchored at the top-left corner on a lattice; a "
                               "node partition on a general graph; None: (2, 2) tiles on a "
                               "lattice, connected blocks of 4 nodes on a graph")),
@@ -143,7 +86,7 @@ ESTIMATOR_OPTIONS: dict[str, tuple[Option, ...]] = {
                     Option("n_draws", "int >= 10", 1000,
                            lambda n, v: check_positive_int(n, v, minimum=10),
                            "simulations per Fisher information / MCMC-MLE round"),
-                    Option("seed", "int >= 0", 0, _nonneg_int,
+                    Option("seed", "int >= 0", 0, nonneg_int,
                            "seed of every simulation of the calibration")),
     "likelihood": (*COMMON, Option("sampler", "'auto' | 'gibbs' | 'swendsen_wang'", "auto",
                                    choice_check("auto", "gibbs", "swendsen_wang"),
@@ -250,6 +193,9 @@ class MRF(Model):
     # -- compilation -----------------------------------------------------------------------------
     def _covariates(self, graph: Graph, covariates: Mapping[str, Any] | None) -> dict:
         """Node covariates reshaped to (n_nodes[, k]) and checked against the terms."""
+        if covariates is not None and not isinstance(covariates, Mapping):
+            raise ValueError("covariates must be a mapping name -> array: the model's terms "
+                             "name their covariates")
         covariates = dict(covariates or {})
         needed: list[str] = []
         for t in self.terms or ():
@@ -335,7 +281,15 @@ class MRF(Model):
         x = check_configurations(data, self.n_states,
                                  g.shape if g.shape is not None else (g.n_nodes,))
         b = options.get("bounds")
-        if b is not None:
+        if isinstance(b, Mapping):
+            bounds = bounds.copy()
+            unknown = sorted(set(b) - set(names))
+            if unknown:
+                raise ValueError(f"bounds names unknown parameter(s) {unknown}; parameters: "
+                                 f"{list(names)}")
+            for k, v in b.items():
+                bounds[names.index(k)] = bounds_option(f"bounds[{k!r}]", [v])[0]
+        elif b is not None:
             if b.shape != (len(names), 2):
                 raise ValueError(f"bounds must be ({len(names)}, 2), one row per parameter "
                                  f"{names}; got {b.shape}")
@@ -365,7 +319,7 @@ class MRF(Model):
         if estimator == "block":
             blocks = est.make_blocks(design.graph, options["block"], design.q)
             return est.ConditionalTarget(rows=design.block_rows(x, blocks), blocks=blocks,
-                                         extra={"block": _jsonable(options["block"]),
+                                         extra={"block": jsonable(options["block"]),
                                                 "n_blocks": len(blocks)}, **common)
         if estimator == "exact":
             return est.ExactTarget(method=options["method"], **common)
@@ -412,14 +366,6 @@ class MRF(Model):
     def __repr__(self) -> str:
         return (f"MRF(name={self.name!r}, n_states={self.n_states}, "
                 f"graph={self.graph_spec!r})")
-
-
-def _jsonable(value: Any) -> Any:
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, list):
-        return [_jsonable(v) for v in value]
-    return value
 
 
 def _one_theta(theta: Any, names: Sequence[str]) -> np.ndarray:

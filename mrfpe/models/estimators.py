@@ -29,6 +29,7 @@ from mrfpe.models.design import (
     softmax_rows_log_prob,
 )
 from mrfpe.models.graph import Graph
+from mrfpe.models.options import largest_block, node_blocks
 from mrfpe.targets.base import Target, as_theta_batch
 from mrfpe.validation import check_seed
 
@@ -219,76 +220,12 @@ class LikelihoodTarget(ModelTarget):
 
 
 def make_blocks(graph: Graph, block: Any, q: int) -> list[np.ndarray]:
-    """Node blocks from a tile ``(bh, bw)`` (lattice), a size, labels or explicit arrays.
-
-    Tiles are anchored at the top-left corner; partial tiles fill the right and
-    bottom edges. An integer ``m`` grows connected blocks of up to ``m`` nodes
-    breadth-first (on a lattice too); ``None`` means ``(2, 2)`` tiles on a
-    lattice and ``m = 4`` on a general graph.
-    Every block must have at most :data:`MAX_BLOCK_CONFIGURATIONS` joint states.
-    """
-    n = graph.n_nodes
-    if block is None:
-        block = (2, 2) if graph.shape is not None else 4
-    if isinstance(block, tuple):
-        if graph.shape is None:
-            raise ValueError("block must be a node partition (labels or arrays) on a general "
-                             "graph; a tile (bh, bw) needs a lattice")
-        _H, W = graph.shape
-        bh, bw = block
-        r, c = np.divmod(np.arange(n), W)
-        labels = (r // bh) * (-(-W // bw)) + c // bw
-    elif isinstance(block, int):
-        labels = _connected_runs(graph, block)
-    elif isinstance(block, np.ndarray):
-        labels = block
-        if labels.shape != (n,):
-            raise ValueError(f"block labels must have one entry per node ({n}); got "
-                             f"{labels.shape}")
-    else:
-        blocks = [np.asarray(b, dtype=np.int64) for b in block]
-        allnodes = np.concatenate(blocks) if blocks else np.zeros(0, np.int64)
-        if allnodes.size and (allnodes.min() < 0 or allnodes.max() >= n):
-            raise ValueError(f"block node ids must lie in [0, {n - 1}]")
-        if np.unique(allnodes).size != allnodes.size:
-            raise ValueError("blocks must be disjoint (a node appears in two blocks)")
-        if allnodes.size != n:
-            raise ValueError(f"blocks must cover every node; {n - allnodes.size} of {n} are in "
-                             f"no block")
-        _check_block_sizes(blocks, q)
-        return blocks
-    _, inv = np.unique(labels, return_inverse=True)
-    order = np.argsort(inv, kind="stable")
-    bounds = np.cumsum(np.bincount(inv))[:-1]
-    blocks = np.split(order.astype(np.int64), bounds)
-    _check_block_sizes(blocks, q)
-    return blocks
-
-
-def _connected_runs(graph: Graph, m: int) -> np.ndarray:
-    """Block labels: connected groups of up to ``m`` nodes grown breadth-first in id order."""
-    indptr, nbr, _ = graph.neighbours()
-    labels = np.full(graph.n_nodes, -1, dtype=np.int64)
-    current = 0
-    for start in range(graph.n_nodes):
-        if labels[start] >= 0:
-            continue
-        queue, size = [start], 0
-        labels[start] = current
-        while queue and size < m:
-            v = queue.pop(0)
-            size += 1
-            for w in nbr[indptr[v]:indptr[v + 1]]:
-                if labels[w] < 0 and size + len(queue) < m:
-                    labels[w] = current
-                    queue.append(int(w))
-        current += 1
-    return labels
-
-
-def _check_block_sizes(blocks: Sequence[np.ndarray], q: int) -> None:
-    m = max((b.size for b in blocks), default=0)
+    """:func:`mrfpe.models.options.node_blocks`, each with at most
+    :data:`MAX_BLOCK_CONFIGURATIONS` joint states of ``q`` states per node."""
+    blocks = node_blocks(graph, block)
+    m = largest_block(blocks)
     if float(q) ** m > MAX_BLOCK_CONFIGURATIONS:
         raise ValueError(f"block of {m} nodes with {q} states has {q}^{m} joint states; "
                          f"block pseudolikelihood enumerates at most "
                          f"{MAX_BLOCK_CONFIGURATIONS} per block (use smaller blocks)")
+    return blocks

@@ -114,8 +114,9 @@ import scipy.sparse.linalg as spla
 from mrfpe.models.base import Model
 from mrfpe.models.discrete import ESTIMATOR_OPTIONS as DISCRETE_OPTIONS
 from mrfpe.models.graph import NEIGHBOURHOODS, Graph, LatticeSpec, as_graph_spec
+from mrfpe.models.options import COMMON_OPTIONS, block_option, jsonable, node_blocks, nonneg_int
 from mrfpe.targets.base import Target, as_theta_batch
-from mrfpe.targets.options import Option, choice_check, optional
+from mrfpe.targets.options import Option, choice_check
 from mrfpe.validation import check_bool, check_choice, check_positive_int, check_seed
 
 __all__ = ["MAX_BLOCK_NODES", "MAX_DENSE_NODES", "MAX_DENSE_SIMULATION", "MAX_EIGEN_NODES",
@@ -435,75 +436,14 @@ def _ldl(A: sp.csc_matrix) -> tuple[Any, np.ndarray] | None:
 # ------------------------------------------------------------------------------------------------
 # options
 # ------------------------------------------------------------------------------------------------
-def _covariates_option(name: str, value: Any) -> Any:
-    if value is None:
-        return None
-    if isinstance(value, Mapping):
-        return dict(value)
-    if isinstance(value, str) or not (hasattr(value, "__len__")
-                                      or isinstance(value, np.ndarray)):
-        raise ValueError(f"{name} must be an array (nodes[, k]) or a mapping name -> array; "
-                         f"got {type(value).__name__}")
-    return value
-
-
-def _bounds_option(name: str, value: Any) -> Any:
-    if isinstance(value, Mapping):
-        return dict(value)
-    try:
-        b = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a finite (d, 2) array or a mapping name -> (low, "
-                         f"high); got {value!r}") from None
-    if b.ndim != 2 or b.shape[1] != 2:
-        raise ValueError(f"{name} must be a finite (d, 2) array or a mapping name -> (low, "
-                         f"high); got shape {b.shape}")
-    return b
-
-
-def _nonneg_int(name: str, value: Any) -> int:
-    return check_positive_int(name, value, minimum=0)
-
-
-def _block_option(name: str, value: Any) -> Any:
-    """A tile ``(bh, bw)``, a run length, per-node labels or a list of node-id arrays."""
-    def is_int(v: Any) -> bool:
-        return isinstance(v, int | np.integer) and not isinstance(v, bool)
-
-    if isinstance(value, tuple | list) and len(value) == 2 and all(is_int(v) for v in value):
-        if value[0] < 1 or value[1] < 1:
-            raise ValueError(f"{name} must be a tile (bh, bw) of positive integers; got "
-                             f"{value!r}")
-        return (int(value[0]), int(value[1]))
-    if is_int(value):
-        if value < 1:
-            raise ValueError(f"{name} must be a positive block size; got {value!r}")
-        return int(value)
-    if isinstance(value, np.ndarray) and value.ndim == 1 and value.dtype.kind in "iu":
-        return value.astype(np.int64)
-    if isinstance(value, list | tuple) and value and all(
-            np.ndim(v) == 1 and np.asarray(v).dtype.kind in "iu" for v in value):
-        return [np.asarray(v, dtype=np.int64) for v in value]
-    if isinstance(value, list) and value and all(is_int(v) for v in value):
-        return np.asarray(value, dtype=np.int64)
-    raise ValueError(f"{name} must be a tile (bh, bw) on a lattice, a block size, a block label "
-                     f"per node, or a list of node-id arrays; got {value!r:.80}")
-
-
-COMMON = (
-    Option("covariates", "array (nodes[, k]) | mapping name -> array | None", None,
-           _covariates_option, "node covariates z_i: (H, W[, k]) on a lattice, (n[, k]) on a "
-           "graph, or {name: (H, W) | (n,)}"),
-    Option("bounds", "(d, 2) array | mapping name -> (low, high) | None", None,
-           optional(_bounds_option), "sampling-space bounds (default: see default_bounds)"),
-)
+COMMON = COMMON_OPTIONS
 
 ESTIMATOR_OPTIONS: dict[str, tuple[Option, ...]] = {
     "pl": COMMON,
-    "coding": (*COMMON, Option("coding", "int >= 0", 0, _nonneg_int,
+    "coding": (*COMMON, Option("coding", "int >= 0", 0, nonneg_int,
                                "which colour class (Besag coding) 0 .. n_codings - 1")),
     "block": (*COMMON, Option("block", "(bh, bw) | int | labels | list of arrays | None", None,
-                              optional(_block_option),
+                              block_option,
                               "tiles (bh, bw) anchored at the top-left corner on a lattice; a "
                               "node partition on a general graph (blocks of <= "
                               f"{MAX_BLOCK_NODES} nodes); default (2, 2) tiles on a lattice, "
@@ -784,9 +724,6 @@ class GaussianMRF(Model):
                 raise ValueError(f"coding must be in [0, {len(classes) - 1}] (the graph has "
                                  f"{len(classes)} codings); got {k}")
         if estimator == "block":
-            if options["block"] is None:
-                options["block"] = (min(2, st.graph.shape[0]), min(2, st.graph.shape[1])) \
-                    if st.graph.shape is not None else min(4, st.n)
             blocks = make_blocks(st.graph, options["block"])
         if st.needs_factorisation():
             st.check_sparse_size(f"deciding positive definiteness (estimator {estimator!r})")
@@ -798,7 +735,7 @@ class GaussianMRF(Model):
                                     extra={"coding": k, "n_codings": len(classes)}, **common)
         if estimator == "block":
             return GaussianBlockTarget(blocks=blocks, extra={
-                "block": _jsonable(options["block"]), "n_blocks": len(blocks)}, **common)
+                "block": jsonable(options["block"]), "n_blocks": len(blocks)}, **common)
         if estimator == "exact":
             return GaussianExactTarget(method=options["method"], **common)
         if estimator == "likelihood":
@@ -925,60 +862,9 @@ def _real_array(value: Any, what: str) -> np.ndarray:
     return z
 
 
-def _jsonable(value: Any) -> Any:
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, list | tuple):
-        return [_jsonable(v) for v in value]
-    return value
-
-
 def make_blocks(graph: Graph, block: Any) -> list[np.ndarray]:
-    """Node blocks from a tile ``(bh, bw)`` (lattice), a run length, labels or node-id arrays.
-
-    Tiles are anchored at the top-left corner (partial tiles at the right and
-    bottom edges), nodes in row-major order within a tile. Every block has at
-    most :data:`MAX_BLOCK_NODES` nodes.
-    """
-    n = graph.n_nodes
-    if isinstance(block, tuple):
-        if graph.shape is None:
-            raise ValueError("block must be a node partition (a size, labels or arrays) on a "
-                             "general graph; a tile (bh, bw) needs a lattice")
-        H, W = graph.shape
-        bh, bw = block
-        if bh > H or bw > W:
-            raise ValueError(f"block tile {block} must fit in the lattice {graph.shape}")
-        r, c = np.divmod(np.arange(n), W)
-        labels = (r // bh) * (-(-W // bw)) + c // bw
-    elif isinstance(block, int):
-        if block > n:
-            raise ValueError(f"block size must be at most the number of nodes ({n}); got "
-                             f"{block}")
-        labels = np.arange(n) // block
-    elif isinstance(block, np.ndarray):
-        labels = block
-        if labels.shape != (n,):
-            raise ValueError(f"block labels must have one entry per node ({n}); got "
-                             f"{labels.shape}")
-    else:
-        blocks = [np.asarray(b, dtype=np.int64) for b in block]
-        allnodes = np.concatenate(blocks) if blocks else np.zeros(0, np.int64)
-        if allnodes.size and (allnodes.min() < 0 or allnodes.max() >= n):
-            raise ValueError(f"block node ids must lie in [0, {n - 1}]")
-        if np.unique(allnodes).size != allnodes.size:
-            raise ValueError("blocks must be disjoint (a node appears in two blocks)")
-        if allnodes.size != n:
-            raise ValueError(f"blocks must cover every node; {n - allnodes.size} of {n} are in "
-                             f"no block")
-        if any(b.size == 0 for b in blocks):
-            raise ValueError("blocks must not be empty")
-        _check_block_sizes(blocks)
-        return blocks
-    _, inv = np.unique(labels, return_inverse=True)
-    order = np.argsort(inv, kind="stable")
-    cuts = np.cumsum(np.bincount(inv))[:-1]
-    blocks = np.split(order.astype(np.int64), cuts)
+    """:func:`mrfpe.models.options.node_blocks`, each of at most :data:`MAX_BLOCK_NODES` nodes."""
+    blocks = node_blocks(graph, block)
     _check_block_sizes(blocks)
     return blocks
 

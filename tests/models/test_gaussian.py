@@ -21,6 +21,7 @@ from threadpoolctl import threadpool_limits
 
 from mrfpe.models import from_adjacency, from_networkx, lattice
 from mrfpe.models.gaussian import MAX_BLOCK_NODES, GaussianMRF, autonormal
+from mrfpe.models.options import node_blocks
 
 RNG = np.random.default_rng(20261205)
 
@@ -281,8 +282,8 @@ def test_block_on_a_general_graph_partition():
     blocks = [np.flatnonzero(labels == k) for k in np.unique(labels)]
     for spec in (labels, blocks, 3):
         t = model.target("block", x, block=spec)
-        bl = blocks if not isinstance(spec, int) else [np.arange(i, min(i + 3, 16))
-                                                       for i in range(0, 16, 3)]
+        # an int grows connected blocks (the partition is the library's; the values are not)
+        bl = blocks if not isinstance(spec, int) else node_blocks(model.graph(), 3)
         want = [_block(x, np.full(16, th[0]), _Q([W], th[1:2], th[2]), bl) for th in theta]
         np.testing.assert_allclose(t.log_prob(theta), want, rtol=1e-9)
     pl = model.target("pl", x).log_prob(theta)
@@ -530,12 +531,13 @@ def test_check_model_conformance():
     (lambda m: m.target("pl", np.zeros((4, 4)) + 1j), "real numbers"),
     (lambda m: m.target("pl", np.zeros((4, 4)), covariates=np.zeros((4, 4))),
      "declares none"),
-    (lambda m: m.target("block", np.zeros((4, 4)), block=(5, 2)), "must fit"),
+    (lambda m: m.target("block", np.zeros((4, 4)), block=(0, 2)), "positive integers"),
     (lambda m: m.target("block", np.zeros((25, 25)), block=(21, 21)),
      f"m <= {MAX_BLOCK_NODES}"),
     (lambda m: m.target("block", np.zeros((4, 4)), block=(0, 2)), "positive"),
     (lambda m: m.target("coding", np.zeros((4, 4)), coding=2), r"coding must be in \[0, 1\]"),
-    (lambda m: m.target("pl", np.zeros((4, 4)), bounds=np.zeros((2, 2))), r"bounds must be \(3"),
+    (lambda m: m.target("pl", np.zeros((4, 4)), bounds=[[0, 1], [0, 1]]), r"bounds must be \(3"),
+    (lambda m: m.target("pl", np.zeros((4, 4)), bounds=np.zeros((3, 2))), "lower < upper"),
     (lambda m: m.target("pl", np.zeros((4, 4)), bounds={"couplng": (0, 1)}), "unknown"),
     (lambda m: m.target("pl", np.zeros((4, 4)), bounds={"coupling": (1, 0)}), "low < high"),
     (lambda m: m.target("block", np.zeros((4, 4)), blok=2), "did you mean 'block'"),

@@ -59,6 +59,7 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
+from mrfpe._arviz import arviz
 from mrfpe._caller import stacklevel_outside_mrfpe
 from mrfpe.resampling import check_log_weights, ess, normalise_log_weights
 
@@ -135,7 +136,7 @@ def chain_ess(x: np.ndarray) -> float:
     pooled over the chains: the smaller of the two for the worst parameter (0 where
     ArviZ gives no finite value). What :func:`diagnose` reports as ``ess_chain``, and
     what the MCMC samplers' ``ess`` trace holds at its checkpoints."""
-    import arviz as az
+    az = arviz()
 
     ess_min = math.inf
     with warnings.catch_warnings():  # ArviZ warns on short or constant chains; we report
@@ -183,7 +184,7 @@ def _chain_stats(theta: np.ndarray, layout: np.ndarray,
                  ensemble: bool = False) -> tuple[float, float]:
     """(worst bulk/tail ESS over parameters, worst R̂ or NaN for one chain) from ArviZ
     (for an ensemble the nested R̂ of :func:`nested_rhat`)."""
-    import arviz as az
+    az = arviz()
 
     x = theta[layout]  # (chain, draw, param)
     if ensemble and x.shape[0] >= 2 * ENSEMBLE_SUPERCHAINS:
@@ -203,7 +204,7 @@ def _pareto_k(log_w: np.ndarray, reff: float) -> float:
     pos = log_w[np.isfinite(log_w)]
     if pos.size == 0 or np.ptp(pos) <= 1e-12 * max(1.0, float(np.max(np.abs(pos)))):
         return math.nan
-    import arviz as az
+    az = arviz()
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

@@ -44,8 +44,10 @@ an importance sampler of the target) is unreliable whatever its ESS, and says wh
 
 :func:`mrfpe.posterior.build` stores the result as the attributes
 ``diag_ess``, ``diag_ess_kish``, ``diag_ess_chain``, ``diag_pareto_k``, ``diag_rhat``
-(floats, NaN where not applicable), ``diag_reliable`` (bool) and ``diag_messages``
-(list of str), see :data:`ATTRS`, and warns once with :class:`PosteriorWarning`
+(floats, NaN where not applicable), ``diag_reliable`` (the integer 1 or 0: netCDF
+has no boolean attribute, and the posterior should write with plain
+``Dataset.to_netcdf``) and ``diag_messages`` (the reasons, one per line; empty
+when reliable), see :data:`ATTRS`, and warns once with :class:`PosteriorWarning`
 when a posterior of kind ``"draws"`` is unreliable.
 """
 
@@ -78,6 +80,7 @@ __all__ = [
     "diagnostics_attrs",
     "nested_rhat",
     "pareto_k_threshold",
+    "stored_messages",
 ]
 
 #: Smallest effective sample size a posterior's estimates are trusted at.
@@ -95,7 +98,7 @@ KINDS = ("draws", "optima")
 #: The attributes :func:`diagnostics_attrs` returns, and their types.
 ATTRS: dict[str, type] = {
     "diag_ess": float, "diag_ess_kish": float, "diag_ess_chain": float,
-    "diag_pareto_k": float, "diag_rhat": float, "diag_reliable": bool, "diag_messages": list,
+    "diag_pareto_k": float, "diag_rhat": float, "diag_reliable": bool, "diag_messages": str,
 }
 
 
@@ -350,11 +353,19 @@ def diagnose(post: Any) -> dict[str, Any]:
 
 
 def diagnostics_attrs(diag: dict[str, Any]) -> dict[str, Any]:
-    """The ``diag_*`` attributes (:data:`ATTRS`) of a :func:`diagnose` result."""
+    """The ``diag_*`` attributes (:data:`ATTRS`) of a :func:`diagnose` result, in types
+    netCDF stores: ``diag_reliable`` as 1 or 0, ``diag_messages`` one reason per line."""
     return {"diag_ess": diag["ess"], "diag_ess_kish": diag["ess_kish"],
             "diag_ess_chain": diag["ess_chain"], "diag_pareto_k": diag["pareto_k"],
-            "diag_rhat": diag["rhat"], "diag_reliable": bool(diag["reliable"]),
-            "diag_messages": list(diag["messages"])}
+            "diag_rhat": diag["rhat"], "diag_reliable": int(bool(diag["reliable"])),
+            "diag_messages": "\n".join(diag["messages"])}
+
+
+def stored_messages(post: xr.Dataset) -> list[str]:
+    """The reasons a posterior was found unreliable, from its ``diag_messages`` attribute
+    (one per line; a list in files written before the attribute became a string)."""
+    m = post.attrs.get("diag_messages", "")
+    return [str(x) for x in m] if isinstance(m, list | tuple) else str(m).splitlines()
 
 
 def warn_if_unreliable(diag: dict[str, Any], sampler: str, stacklevel: int | None = None) -> None:

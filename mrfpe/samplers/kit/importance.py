@@ -9,7 +9,7 @@ __all__ = ["THESIS2_POWER", "THESIS_POWER", "partition_or_none", "softened"]
 #: Default softening power (5.69) of the thesis's algorithms (PMC (I)/(II), PPF, SIR
 #: 5.2.2). The thesis does not state its value; a prototype measured that with PMC (II)
 #: powers >= 0.03 collapse the cloud into bad regions and <= 0.01 leave it diffuse
-#: (issue 3), so the largest non-collapsing value.
+#: (an early measurement), so the largest non-collapsing value.
 THESIS_POWER = 0.01
 
 #: Softening power of PMC (II) read as compounding (``PMC(variant="thesis2")``): on the

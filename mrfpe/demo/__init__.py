@@ -38,7 +38,7 @@ class Settings:
     n_labels: int
     n_samples: int
     n_iterations: int
-    #: Sub-lattices PMC cycles through (1: every iteration weighs the whole image).
+    #: Sub-lattices PMC cycles through (1 weighs the whole image in every iteration).
     k: int
     #: The thesis's mean |MAP − truth| at these settings and this version's, or None.
     thesis: str | None = None

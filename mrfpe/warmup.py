@@ -64,7 +64,7 @@ def warm_target(target: Any, say: Callable[[str], None] | None = _stderr) -> flo
     if callable(getattr(target, "partition", None)):
         try:
             parts = target.partition(2, "strided")
-        except ValueError:  # too small to split: nothing more to compile
+        except (ValueError, TypeError, NotImplementedError):  # no split: nothing to compile
             parts = []
         if parts:
             parts[0].log_prob(centre)

@@ -28,14 +28,17 @@ REPORT_AFTER_S = 2.0
 def kernels_cached() -> bool:
     """Whether numba's on-disk cache holds mrfpe's pseudolikelihood kernels.
 
-    Looks for the cache index of the main kernel (where numba keeps it: beside
+    Looks for the cache index of the main kernel and of the mixture density that
+    PMC weighs its particles with (where numba keeps them: beside
     the module when that is writable, else the user's cache directory). False
     when it cannot tell.
     """
     try:
+        from mrfpe import mixture
         from mrfpe.targets import lean
 
-        return Path(lean.lean_terms._cache._cache_file._index_path).exists()
+        return all(Path(k._cache._cache_file._index_path).exists()
+                   for k in (lean.lean_terms, mixture._lse_rows))
     except Exception:  # numba internals differ: assume a cold cache
         return False
 
@@ -45,7 +48,8 @@ def _stderr(text: str) -> None:
 
 
 def warm_target(target: Any, say: Callable[[str], None] | None = _stderr) -> float:
-    """Evaluate ``target`` (and one of its sub-lattice parts) once, compiling what it needs.
+    """Evaluate ``target`` (and one of its sub-lattice parts) once, compiling what it needs,
+    and the mixture density (:func:`mrfpe.mixture.log_mixture_density`) in its dimension.
 
     Prints "compiling numerical kernels (first run only …)" through ``say``
     before a first run on a cold cache, and the time taken when the warm-up was
@@ -68,6 +72,9 @@ def warm_target(target: Any, say: Callable[[str], None] | None = _stderr) -> flo
             parts = []
         if parts:
             parts[0].log_prob(centre)
+    from mrfpe.mixture import log_mixture_density
+
+    log_mixture_density(np.vstack([centre, centre]), centre, np.zeros(1), 0.1)
     dt = time.perf_counter() - t0
     if say is not None and dt > REPORT_AFTER_S:
         say(f"kernels ready in {dt:.0f} s (cached for later runs)")

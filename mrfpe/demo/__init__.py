@@ -104,7 +104,8 @@ def main(out_dir: str | Path = "mrfpe-demo", quick: bool = False, seed: int = 0)
     lines: list[str] = []
 
     def say(text: str = "") -> None:
-        for line in textwrap.wrap(text, WIDTH, subsequent_indent="  ") or [""]:
+        for line in textwrap.wrap(text, WIDTH, subsequent_indent="  ", break_on_hyphens=False,
+                                  break_long_words=False) or [""]:
             print(line, flush=True)
             lines.append(line)
 

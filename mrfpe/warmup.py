@@ -23,6 +23,9 @@ __all__ = ["kernels_cached", "main", "warm_target"]
 
 #: A warm-up slower than this (seconds) was a compilation and is reported.
 REPORT_AFTER_S = 2.0
+#: Particles in the warm-up's batch: enough for the batch kernels (the pseudolikelihood
+#: runs batches of fewer than 5 through its small-batch kernels).
+BATCH = 8
 
 
 def kernels_cached() -> bool:
@@ -38,7 +41,7 @@ def kernels_cached() -> bool:
         from mrfpe.targets import lean
 
         return all(Path(k._cache._cache_file._index_path).exists()
-                   for k in (lean.lean_terms, mixture._lse_rows))
+                   for k in (lean.lean_terms, lean.lean_terms_nodes, mixture._lse_rows))
     except Exception:  # numba internals differ: assume a cold cache
         return False
 
@@ -64,7 +67,8 @@ def warm_target(target: Any, say: Callable[[str], None] | None = _stderr) -> flo
             "`mrfpe warmup` does it ahead of time) ...")
     t0 = time.perf_counter()
     centre = b.mean(axis=1)[None]
-    target.log_prob(centre)
+    target.log_prob(centre)  # one particle and a batch: each has its own kernel
+    target.log_prob(np.repeat(centre, BATCH, axis=0))
     if callable(getattr(target, "partition", None)):
         try:
             parts = target.partition(2, "strided")

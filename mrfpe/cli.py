@@ -172,7 +172,8 @@ def build_parser() -> argparse.ArgumentParser:
                        "PMC posterior -> verdict, figure and report",
                        description="Render a synthetic Ward scene with known parameters, "
                        "sample its pseudolikelihood with PMC (1000 particles x 20 "
-                       "iterations, about 15 s once the kernels are compiled), say how close "
+                       "iterations, about 15 s on two idle cores once the kernels are "
+                       "compiled), say how close "
                        "it came to the truth, and write scene.nc, posterior.nc, posterior.png "
                        "and report.md into --out.")
     d.add_argument("--out", default="mrfpe-demo",

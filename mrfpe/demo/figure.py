@@ -95,6 +95,7 @@ def posterior_figure(target: Any, post: Any, truth: np.ndarray, path: Path,
     ax.axvline(m[k], color="k", lw=1.5, ls="--", label="MAP")
     ax.set(xlabel=label[k], ylabel="posterior weight", title="Diffuse reflectance")
     ax.ticklabel_format(axis="x", useOffset=False)
+    ax.xaxis.set_major_locator(plt.MaxNLocator(4))  # long labels: few ticks
     ax.legend(loc="upper right", framealpha=0.9)
 
     # Right: the MAP's distance to the truth per iteration.

@@ -42,28 +42,42 @@ extensions = [
     "sphinx.ext.napoleon",
     "sphinx.ext.mathjax",
     "sphinx.ext.viewcode",
+    "sphinx_design",  # the landing page's cards
 ]
 
 source_suffix = {".rst": "restructuredtext", ".md": "myst-nb"}
 exclude_patterns = ["_build", "results/**/trials", "**/.ipynb_checkpoints", "README.md",
-                    "results/*/tables*.md"]  # table fragments a report names, not pages
+                    "results/*/tables*.md",  # table fragments a report names, not pages
+                    "tutorials/_download"]  # the tutorials as notebooks and scripts
 templates_path = ["_templates"]
-suppress_warnings = ["config.cache"]  # autosummary_context holds functions
-html_static_path = ["_static"]
-html_css_files = ["custom.css"]
+# Values here are what the extensions leave them at (sphinx-design appends its static
+# folder, Sphinx normalises the CSS entries, MyST sets MathJax's classes): Sphinx
+# compares the configuration with the last build's, and a value an extension changes
+# during a build would count as a change and redo every page.
+html_static_path = ["_static", str(Path(importlib.import_module("sphinx_design").__file__)
+                                   .parent / "static")]
+html_css_files = [("custom.css", {"priority": 800})]
+mathjax4_config = {"options": {"processHtmlClass": "tex2jax_process|mathjax_process|math|"
+                                                   "output_area"}}
 html_theme = "furo"
 html_title = f"mrfpe {release}"
 html_theme_options = {"sidebar_hide_name": False}
 
-# Formulas are typeset by MathJax from its CDN (Sphinx's default). For offline
-# viewing point MRFPE_DOCS_MATHJAX at a local copy, e.g. Debian's libjs-mathjax:
+# Formulas are typeset by the copy of MathJax 3 that the sphinx-mathjax-offline package
+# ships (the [docs] extra), copied into _static/mathjax: the pages read offline. Its SVG
+# output needs no web fonts (a page opened from file:// may not load those). To use
+# another MathJax, set MRFPE_DOCS_MATHJAX to its URL, e.g. Debian's libjs-mathjax:
 # MRFPE_DOCS_MATHJAX="file:///usr/share/javascript/mathjax/MathJax.js?config=TeX-AMS-MML_HTMLorMML"
+MATHJAX_LOCAL = "mathjax/tex-svg.js"
 if os.environ.get("MRFPE_DOCS_MATHJAX"):
     mathjax_path = os.environ["MRFPE_DOCS_MATHJAX"]
     if "config=" in mathjax_path:  # MathJax 2 (as Debian ships it): process the math spans
         mathjax2_config = {"tex2jax": {"processClass": "math|tex2jax_process|output_area",
                                        "inlineMath": [["\\(", "\\)"]],
                                        "displayMath": [["\\[", "\\]"]]}}
+else:
+    extensions.append("sphinx-mathjax-offline")  # the package's module name has hyphens
+    mathjax_path = MATHJAX_LOCAL
 
 # -- MyST / MyST-NB -----------------------------------------------------------
 myst_enable_extensions = ["dollarmath", "amsmath", "colon_fence", "deflist"]
@@ -189,12 +203,35 @@ def submodules(modname: str) -> list[str]:
             if not i.name.startswith("_")]
 
 
-autosummary_context = {
+# The templates' helpers are functions, which a configuration value cannot hold across
+# builds (Sphinx pickles the configuration and compares it with the next build's: a
+# function never compares equal, so every build would re-read every page). They are
+# lent to autosummary for its generation step only (_lend_template_helpers).
+autosummary_context: dict = {}
+_TEMPLATE_HELPERS = {
     "submodules": submodules,
     "defined_here": defined_here,
     "reexported_here": reexported_here,
     "kind_of": kind_of,
 }
+
+
+def _dedupe_static_path(app):
+    """sphinx-design appends its static folder, which the list above already holds."""
+    seen: list[str] = []
+    for p in app.config.html_static_path:
+        if p not in seen:
+            seen.append(p)
+    app.config.html_static_path[:] = seen
+
+
+def _lend_template_helpers(app):
+    app.config.autosummary_context.update(_TEMPLATE_HELPERS)
+
+
+def _return_template_helpers(app):
+    for key in _TEMPLATE_HELPERS:
+        app.config.autosummary_context.pop(key, None)
 
 
 # -- docstring workarounds -------------------------------------------------------
@@ -244,6 +281,10 @@ def _raw_fixes(app, what, name, obj, options, lines):  # noqa: ARG001
         if tdoc and "\n".join(lines).strip() == tdoc.strip():
             lines[:] = []  # a constant's type's docstring (dict, Registry): not its own
             return
+        # napoleon reads a first line "A: B" of a constant's docstring as "type: text";
+        # ours are sentences, so a blank first line keeps all of it the description.
+        if lines[0].strip():
+            lines.insert(0, "")
     for target, old, new in _DOCSTRING_FIXES:
         if name == target:
             text = "\n".join(lines).replace(old, new)
@@ -278,6 +319,19 @@ def _shadowed_modules() -> list[str]:
     return out
 
 
+_SHADOWED_BEFORE: dict[Path, tuple[str, float]] = {}
+
+
+def _remember_shadowed(app):
+    """The shadowed pages as the last build left them (autosummary is about to rewrite
+    them with its own version, which _write_shadowed replaces again)."""
+    gen = HERE / "api" / "generated"
+    for modname in _shadowed_modules():
+        path = gen / f"{modname}.rst"
+        if path.exists():
+            _SHADOWED_BEFORE[path] = (path.read_text(), path.stat().st_mtime)
+
+
 def _write_shadowed(app):
     gen = HERE / "api" / "generated"
     for modname in _shadowed_modules():
@@ -301,6 +355,9 @@ def _write_shadowed(app):
         text = "\n".join(lines)
         if not path.exists() or path.read_text() != text:
             path.write_text(text)
+        before = _SHADOWED_BEFORE.get(path)
+        if before is not None and before[0] == text:  # unchanged: no re-read next time
+            os.utime(path, (before[1], before[1]))
 
 
 def _resolve_reexport(app, env, node, contnode):
@@ -344,7 +401,71 @@ def _page_fixes(app, docname, source):  # noqa: ARG001
             source[0] = source[0].replace(old, new)
 
 
+# -- the tutorials as downloads ------------------------------------------------
+# Each tutorial (a MyST notebook) is also written as a Jupyter notebook and a Python
+# script under tutorials/_download/ (rewritten only when its source changes, so an
+# unchanged site rebuilds without work) and linked from the top of its page.
+
+DOWNLOADS = HERE / "tutorials" / "_download"
+
+
+def _as_script(nb) -> str:
+    """A percent-format script (``# %%`` cells) of notebook ``nb``."""
+    out = []
+    for cell in nb.cells:
+        if "remove-cell" in cell.get("metadata", {}).get("tags", []):
+            continue
+        if cell.cell_type == "code":
+            out.append("# %%\n" + cell.source.strip() + "\n")
+        elif cell.source.strip():
+            text = "\n".join(("# " + ln).rstrip() for ln in cell.source.strip().splitlines())
+            out.append("# %% [markdown]\n" + text + "\n")
+    return "\n".join(out)
+
+
+def _write_if_changed(path: Path, text: str) -> None:
+    if not path.exists() or path.read_text() != text:
+        path.write_text(text)
+
+
+def _write_downloads(app):
+    import nbformat
+    from myst_nb.core.read import read_myst_markdown_notebook
+
+    DOWNLOADS.mkdir(exist_ok=True)
+    for md in sorted((HERE / "tutorials").glob("*.md")):
+        nb = read_myst_markdown_notebook(md.read_text())
+        for i, cell in enumerate(nb.cells):  # a plain notebook, the same on every build
+            cell.get("metadata", {}).pop("mystnb", None)
+            cell["id"] = f"cell-{i}"
+        _write_if_changed(DOWNLOADS / f"{md.stem}.ipynb", nbformat.writes(nb) + "\n")
+        _write_if_changed(DOWNLOADS / f"{md.stem}.py", _as_script(nb))
+
+
+def _download_links(app, docname, source):
+    if not docname.startswith("tutorials/") or docname.startswith("tutorials/_"):
+        return
+    stem = docname.split("/", 1)[1]
+    note = (f"\n\n:::{{admonition}} Run it yourself\n:class: tip\n"
+            f"Download this tutorial as a notebook "
+            f"{{download}}`{stem}.ipynb <_download/{stem}.ipynb>` or a script "
+            f"{{download}}`{stem}.py <_download/{stem}.py>`; it runs in the environment "
+            f"of the [installation](../install.md) page.\n:::\n\n")
+    text = source[0]
+    heading = re.search(r"^# .+$", text, flags=re.M)
+    if heading:
+        source[0] = text[:heading.end()] + note + text[heading.end():].lstrip("\n")
+
+
 def setup(app):
+    if not os.environ.get("MRFPE_DOCS_MATHJAX"):  # the extension set its own CHTML default
+        app.config.mathjax_path = MATHJAX_LOCAL
+    app.connect("builder-inited", _lend_template_helpers, priority=100)  # before autosummary
+    app.connect("builder-inited", _remember_shadowed, priority=100)
+    app.connect("builder-inited", _return_template_helpers, priority=950)
+    app.connect("builder-inited", _dedupe_static_path, priority=960)  # after sphinx-design
+    app.connect("builder-inited", _write_downloads, priority=100)
+    app.connect("source-read", _download_links)
     app.connect("source-read", _page_fixes)
     app.connect("missing-reference", _resolve_reexport)
     app.connect("builder-inited", _write_shadowed, priority=900)  # after autosummary

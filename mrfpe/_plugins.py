@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from mrfpe._caller import stacklevel_outside_mrfpe
+from mrfpe._terminal import WIDTH, plain, table
 
 __all__ = ["PluginInfo", "Registry"]
 
@@ -182,18 +183,19 @@ class Registry:
             raise ValueError(f"{self.kind} {name!r} is broken: {info.error}")
         return info.obj
 
-    def table(self, extra: Callable[[PluginInfo], str] | None = None) -> str:
-        """A plain-text table of all plugins (name, package, version, description)."""
+    def table(self, extra: Callable[[PluginInfo], str] | None = None, *,
+              width: int | None = WIDTH, verbose: bool = False) -> str:
+        """A plain-text table of the plugins: name, package and description, wrapped to
+        ``width`` columns, with ``extra(info)`` (details such as a distance's parameters)
+        before the description; ``verbose`` adds the version."""
         rows = []
         for info in self.entries().values():
             desc = info.description if info.ok else f"BROKEN: {info.error}"
             if extra is not None and info.ok:
                 desc = f"{extra(info)}  {desc}".strip()
-            rows.append((info.name, info.package, info.version, desc))
+            row = (info.name, info.package, info.version, plain(desc))
+            rows.append(row if verbose else row[:2] + row[3:])
         if not rows:
             return f"no {self.kind}s registered under {self.group!r}"
-        w = [max(len(r[i]) for r in [*rows, ("name", "package", "version", "")]) for i in range(3)]
-        head = f"{'name':<{w[0]}}  {'package':<{w[1]}}  {'version':<{w[2]}}  description"
-        lines = [head, "-" * len(head)]
-        lines += [f"{a:<{w[0]}}  {b:<{w[1]}}  {c:<{w[2]}}  {d}" for a, b, c, d in rows]
-        return "\n".join(lines)
+        head = ("name", "package", "version", "description")
+        return table(head if verbose else head[:2] + head[3:], rows, width=width)

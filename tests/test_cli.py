@@ -61,10 +61,36 @@ def test_estimate_then_compare(tiny_scene, tmp_path, capsys):
         outs.append(out)
     assert "MAP" in capsys.readouterr().out
     assert cli.main(["compare", str(outs[0]), str(outs[1]), "--distance", "bhattacharyya"]) == 0
-    d = float(capsys.readouterr().out.strip())
+    d = _compared(capsys.readouterr().out, "bhattacharyya distance")
     assert np.isfinite(d) and d >= 0
     assert cli.main(["compare", str(outs[0]), str(outs[0]), "--distance", "bhattacharyya"]) == 0
-    assert float(capsys.readouterr().out.strip()) <= d + 1e-12
+    assert _compared(capsys.readouterr().out, "bhattacharyya distance") <= d + 1e-12
+
+
+def _compared(out: str, name: str) -> float:
+    """The number of ``mrfpe compare``'s one line, which names the distance first."""
+    assert out.startswith(name + " between ")
+    return float(out.rsplit(": ", 1)[1].split()[0])
+
+
+@pytest.mark.parametrize("argv", [["samplers"], ["distances"], ["study", "list"], ["--help"],
+                                  ["demo", "--help"], ["study", "run", "--help"]])
+def test_output_fits_a_terminal(argv, capsys):
+    """Listings and help fit 100 columns and carry no reStructuredText markup."""
+    try:
+        assert cli.main(argv) == 0
+    except SystemExit as exc:  # --help
+        assert exc.code == 0
+    out = capsys.readouterr().out
+    assert max(map(len, out.splitlines())) <= 100
+    assert "``" not in out and ":func:" not in out and ":mod:" not in out
+
+
+@pytest.mark.parametrize("argv", [["samplers", "--verbose"], ["study", "list", "--verbose"]])
+def test_verbose_listing_wraps_the_details(argv, capsys):
+    assert cli.main(argv) == 0
+    out = capsys.readouterr().out
+    assert max(map(len, out.splitlines())) <= 100 and "…" not in out
 
 
 def test_estimate_reports_bad_settings(tiny_scene, tmp_path, capsys):

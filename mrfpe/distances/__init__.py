@@ -35,6 +35,10 @@ def distance(name: str, a: Any, b: Any, **params: Any) -> float:
     return float(get(name)()(a, b, **params))
 
 
-def table() -> str:
-    """Plain-text listing: name, package, version, kind, symmetry, parameters, description."""
-    return registry.table()
+def table(*, width: int | None = 100, verbose: bool = False) -> str:
+    """Plain-text listing: name, package, version, kind, symmetry, parameters, description.
+
+    ``width`` columns wide: descriptions are cut with "…", or wrapped when ``verbose``
+    (``width=None``: one line per entry, never cut).
+    """
+    return registry.table(width=width, verbose=verbose)

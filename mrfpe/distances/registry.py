@@ -76,8 +76,8 @@ def describe(info: PluginInfo) -> str:
 class DistanceRegistry(Registry):
     """The distance registry; its :meth:`table` shows kind and parameters by default."""
 
-    def table(self, extra: Callable[[PluginInfo], str] | None = None) -> str:
-        return super().table(extra if extra is not None else describe)
+    def table(self, extra: Callable[[PluginInfo], str] | None = None, **kwargs: Any) -> str:
+        return super().table(extra if extra is not None else describe, **kwargs)
 
 
 registry = DistanceRegistry("mrfpe.distances", "distance", validate_distance)

@@ -20,8 +20,11 @@ multi-start optimiser); optional ``chain_type`` (``"ensemble"`` for interacting
 walkers, judged by a nested R̂; absent: independent chains); the diagnostics of
 :func:`diagnose` as ``diag_ess``,
 ``diag_ess_kish``, ``diag_ess_chain``, ``diag_pareto_k``, ``diag_rhat`` (floats, NaN
-where not applicable), ``diag_reliable`` (bool) and ``diag_messages`` (list of
-str); optional ``log_evidence`` and ``log_evidence_se`` (floats): the log normaliser
+where not applicable), ``diag_reliable`` (1 or 0) and ``diag_messages`` (the reasons,
+one per line); every attribute is of a type netCDF stores, so a posterior writes
+with plain ``Dataset.to_netcdf`` and reads back with ``xarray.open_dataset``
+(:func:`save`/:func:`load` keep exact types and NaN as well); optional
+``log_evidence`` and ``log_evidence_se`` (floats): the log normaliser
 of the target *relative to the box*, ``log(∫_box p / vol(box))`` (the evidence under
 the uniform prior on the bounds; :mod:`mrfpe.samplers.kit.evidence`), absent where
 a sampler defines none; for a pseudolikelihood target the normaliser of the
@@ -48,7 +51,7 @@ from the leaf module :mod:`mrfpe.resampling`. Everything is re-exported here.
 from __future__ import annotations
 
 from mrfpe.posterior.arviz import to_arviz
-from mrfpe.posterior.diagnostics import PosteriorWarning, diagnose
+from mrfpe.posterior.diagnostics import PosteriorWarning, diagnose, stored_messages
 from mrfpe.posterior.io import load, save
 from mrfpe.posterior.report import summary
 from mrfpe.posterior.schema import build, validate
@@ -64,6 +67,7 @@ from mrfpe.resampling import ess, log_evidence, normalise_log_weights, perplexit
 
 __all__ = [
     "PosteriorWarning", "build", "diagnose", "ess", "load", "log_evidence", "map_estimate",
-    "normalise_log_weights", "perplexity", "resample", "save", "summary", "to_arviz",
+    "normalise_log_weights", "perplexity", "resample", "save", "stored_messages", "summary",
+    "to_arviz",
     "validate", "weighted_cov", "weighted_mean", "weighted_quantiles", "weights",
 ]

@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
+from mrfpe._arviz import arviz
 from mrfpe.posterior.diagnostics import chain_layout
 from mrfpe.posterior.statistics import resample
 from mrfpe.resampling import check_log_weights
@@ -48,7 +49,7 @@ def to_arviz(post: Any, *, resample_to_equal: bool = True, seed: int | None = 0)
     ValueError
         If ``post`` is not a posterior Dataset or has zero total weight.
     """
-    import arviz as az
+    az = arviz()
 
     if not isinstance(post, xr.Dataset) or any(
             v not in post for v in ("theta", "log_weight", "log_target")):

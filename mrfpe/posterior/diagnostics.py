@@ -44,8 +44,10 @@ an importance sampler of the target) is unreliable whatever its ESS, and says wh
 
 :func:`mrfpe.posterior.build` stores the result as the attributes
 ``diag_ess``, ``diag_ess_kish``, ``diag_ess_chain``, ``diag_pareto_k``, ``diag_rhat``
-(floats, NaN where not applicable), ``diag_reliable`` (bool) and ``diag_messages``
-(list of str), see :data:`ATTRS`, and warns once with :class:`PosteriorWarning`
+(floats, NaN where not applicable), ``diag_reliable`` (the integer 1 or 0: netCDF
+has no boolean attribute, and the posterior should write with plain
+``Dataset.to_netcdf``) and ``diag_messages`` (the reasons, one per line; empty
+when reliable), see :data:`ATTRS`, and warns once with :class:`PosteriorWarning`
 when a posterior of kind ``"draws"`` is unreliable.
 """
 
@@ -59,6 +61,7 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
+from mrfpe._arviz import arviz
 from mrfpe._caller import stacklevel_outside_mrfpe
 from mrfpe.resampling import check_log_weights, ess, normalise_log_weights
 
@@ -77,6 +80,7 @@ __all__ = [
     "diagnostics_attrs",
     "nested_rhat",
     "pareto_k_threshold",
+    "stored_messages",
 ]
 
 #: Smallest effective sample size a posterior's estimates are trusted at.
@@ -94,7 +98,7 @@ KINDS = ("draws", "optima")
 #: The attributes :func:`diagnostics_attrs` returns, and their types.
 ATTRS: dict[str, type] = {
     "diag_ess": float, "diag_ess_kish": float, "diag_ess_chain": float,
-    "diag_pareto_k": float, "diag_rhat": float, "diag_reliable": bool, "diag_messages": list,
+    "diag_pareto_k": float, "diag_rhat": float, "diag_reliable": bool, "diag_messages": str,
 }
 
 
@@ -135,7 +139,7 @@ def chain_ess(x: np.ndarray) -> float:
     pooled over the chains: the smaller of the two for the worst parameter (0 where
     ArviZ gives no finite value). What :func:`diagnose` reports as ``ess_chain``, and
     what the MCMC samplers' ``ess`` trace holds at its checkpoints."""
-    import arviz as az
+    az = arviz()
 
     ess_min = math.inf
     with warnings.catch_warnings():  # ArviZ warns on short or constant chains; we report
@@ -183,7 +187,7 @@ def _chain_stats(theta: np.ndarray, layout: np.ndarray,
                  ensemble: bool = False) -> tuple[float, float]:
     """(worst bulk/tail ESS over parameters, worst R̂ or NaN for one chain) from ArviZ
     (for an ensemble the nested R̂ of :func:`nested_rhat`)."""
-    import arviz as az
+    az = arviz()
 
     x = theta[layout]  # (chain, draw, param)
     if ensemble and x.shape[0] >= 2 * ENSEMBLE_SUPERCHAINS:
@@ -203,7 +207,7 @@ def _pareto_k(log_w: np.ndarray, reff: float) -> float:
     pos = log_w[np.isfinite(log_w)]
     if pos.size == 0 or np.ptp(pos) <= 1e-12 * max(1.0, float(np.max(np.abs(pos)))):
         return math.nan
-    import arviz as az
+    az = arviz()
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -349,11 +353,19 @@ def diagnose(post: Any) -> dict[str, Any]:
 
 
 def diagnostics_attrs(diag: dict[str, Any]) -> dict[str, Any]:
-    """The ``diag_*`` attributes (:data:`ATTRS`) of a :func:`diagnose` result."""
+    """The ``diag_*`` attributes (:data:`ATTRS`) of a :func:`diagnose` result, in types
+    netCDF stores: ``diag_reliable`` as 1 or 0, ``diag_messages`` one reason per line."""
     return {"diag_ess": diag["ess"], "diag_ess_kish": diag["ess_kish"],
             "diag_ess_chain": diag["ess_chain"], "diag_pareto_k": diag["pareto_k"],
-            "diag_rhat": diag["rhat"], "diag_reliable": bool(diag["reliable"]),
-            "diag_messages": list(diag["messages"])}
+            "diag_rhat": diag["rhat"], "diag_reliable": int(bool(diag["reliable"])),
+            "diag_messages": "\n".join(diag["messages"])}
+
+
+def stored_messages(post: xr.Dataset) -> list[str]:
+    """The reasons a posterior was found unreliable, from its ``diag_messages`` attribute
+    (one per line; a list in files written before the attribute became a string)."""
+    m = post.attrs.get("diag_messages", "")
+    return [str(x) for x in m] if isinstance(m, list | tuple) else str(m).splitlines()
 
 
 def warn_if_unreliable(diag: dict[str, Any], sampler: str, stacklevel: int | None = None) -> None:

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import xarray as xr
 
-from mrfpe.posterior.diagnostics import diagnose
+from mrfpe.posterior.diagnostics import diagnose, stored_messages
 from mrfpe.posterior.statistics import map_estimate, weighted_cov, weighted_mean, weighted_quantiles
 from mrfpe.resampling import ess, perplexity
 
@@ -18,7 +18,7 @@ def _diagnostics_lines(post: xr.Dataset) -> list[str]:
     if "diag_reliable" in post.attrs:
         a = post.attrs
         d = {"ess": a["diag_ess"], "pareto_k": a["diag_pareto_k"], "rhat": a["diag_rhat"],
-             "reliable": a["diag_reliable"], "messages": a["diag_messages"]}
+             "reliable": bool(a["diag_reliable"]), "messages": stored_messages(post)}
     else:  # a posterior from before diagnostics were stored
         d = diagnose(post)
 

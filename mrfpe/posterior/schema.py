@@ -227,11 +227,15 @@ _OPTIONAL_ATTRS = {"kind": str, "chain_type": str, "log_evidence": float, "log_e
                    **_DIAG_ATTRS}
 
 
-def _attr_ok(v: Any, typ: type) -> bool:
+def _attr_ok(v: Any, typ: type, key: str = "") -> bool:
+    if key == "diag_messages":  # one reason per line; a list in files of mrfpe < 0.2
+        return isinstance(v, str) or (isinstance(v, list) and all(isinstance(m, str)
+                                                                   for m in v))
     if typ is str:
         return isinstance(v, str)
-    if typ is bool:
-        return isinstance(v, bool | np.bool_)
+    if typ is bool:  # 1/0 as netCDF stores it, or a bool
+        return isinstance(v, bool | np.bool_) or (isinstance(v, int | np.integer)
+                                                  and int(v) in (0, 1))
     if typ is list:
         return isinstance(v, list) and all(isinstance(m, str) for m in v)
     if typ is int:
@@ -302,7 +306,7 @@ def validate(post: Any) -> None:
                 raise ValueError(f"posterior lacks the attribute {key!r}")
             continue
         v = post.attrs[key]
-        if not _attr_ok(v, typ):
+        if not _attr_ok(v, typ, key):
             raise ValueError(f"attribute {key!r} must be {typ.__name__}; got {v!r}")
     if post.attrs.get("chain_type", "independent") not in CHAIN_TYPES:
         raise ValueError(f"attribute 'chain_type' must be one of {CHAIN_TYPES}; got "

@@ -23,6 +23,10 @@ broken = registry.errors  # broken sampler plugins: {name: reason}
 get = registry.get  # the class registered as ``name`` (ValueError lists the others), or a class
 
 
-def table() -> str:
-    """Plain-text table: name, package, version, one-line description (or why broken)."""
-    return registry.table()
+def table(*, width: int | None = 100, verbose: bool = False) -> str:
+    """Plain-text table: name, package, version, one-line description (or why broken).
+
+    ``width`` columns wide: descriptions are cut with "…", or wrapped when ``verbose``
+    (``width=None``: one line per entry, never cut).
+    """
+    return registry.table(width=width, verbose=verbose)

@@ -42,7 +42,7 @@ constant common to all chains (still correctly weighted, and invariant to the
 target's scale); ``"absolute"`` is 7.13 literally; ``"unit"`` is Π₀ = 1.
 
 The weighted chain — post-burn-in, thinned pairs (X_i, Π_i) of every chain — is
-the sample set. Its weights (``weights``): ``"stratified"`` (default since issue 12)
+the sample set. Its weights (``weights``): ``"stratified"`` (the default)
 is the estimator the method's authors use for expectations, stratified truncation
 (Wong & Liang 1997; Liu, Liang & Wong 2001, the thesis's [68]):
 :func:`stratified_truncation` with ``n_strata`` strata of log ϱ and truncation

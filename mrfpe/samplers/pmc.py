@@ -23,7 +23,7 @@ Variants
     weighted covariance (``kernel="covariance"``, :func:`~mrfpe.samplers.kit.covariance_kernel`):
     extensions beyond the thesis, measured in ``benchmarks/bench_accuracy.py``
     and ``benchmarks/bench_pmc.py``. ``kernel="adaptive"`` (diagonal
-    ``min(σ_n, h·sd_j)``, the default until issue 12: too narrow once σ_n → 0,
+    ``min(σ_n, h·sd_j)``, an earlier default: too narrow once σ_n → 0,
     weighted sd 0.67–0.77 of the truth) and ``initial="grid"`` (cell centres) are kept;
     ``power=<float>, kernel="isotropic"`` is the thesis's fixed softening and
     spherical ``σ_n``.

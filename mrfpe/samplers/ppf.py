@@ -22,7 +22,7 @@ give the same numbers, which the tests check.
 Weights (``weights``): ``"thesis"`` is the above, bit-for-bit (with the thesis's
 fixed power, :data:`~mrfpe.samplers.kit.THESIS_POWER`). It is biased: ``1/g^n``
 ignores the jitter, so on a 3-D Gaussian its final ESS is ~10 of 1000 and the mean
-~1 sd off, with the same sign over seeds. ``"mixture"`` (default since issue 12)
+~1 sd off, with the same sign over seeds. ``"mixture"`` (the default)
 accounts for the jitter: by 5.6 PPF over one time step is PMC, so each partition
 runs PMC's deterministic-mixture step (:func:`mrfpe.samplers.pmc.mixture_step`:
 weights ``g^n(x)^l / q^n(x)`` with ``q^n`` the jittered resample's density, a kernel

@@ -29,7 +29,7 @@ from the same kernel (the Gaussian truncated to the box).
 
 Weights (``weights``): ``"thesis"`` is the above, bit-for-bit — biased, because the
 diffusion is never accounted for (on a 3-D Gaussian the weighted sd is 1.1–1.3×
-the truth). ``"mixture"`` (default since issue 12) uses deterministic-mixture
+the truth). ``"mixture"`` (the default) uses deterministic-mixture
 weights (Cappé et al. 2004): classic step t weights each particle by
 ``ϱ^{(t+1)/T}(x) / q_t(x)``, with ``q_t`` the density of the jittered resample it was
 drawn from and the kernel following the cloud's weighted covariance

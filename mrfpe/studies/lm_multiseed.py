@@ -35,19 +35,19 @@ budget moved them by a median 0.003); Ward's best seeds had converged
 (``docs/results/lm_multiseed/readings/budget_probe.py``). Trials record each seed's
 ``status`` and ``n_evals`` from 2 Dec 2026 on, and the report gives the share per cell.
 
-Full run: 160 scenes (2 models × 4 label counts × 20) × 512 seeds run to
-convergence (50-120 thousand residual-and-Jacobian passes per scene) at 100×100
-pixels plus a maximiser per scene, on one core of the 2-core AMD EPYC (Dec 2026),
-each scene beside another study on the other core: 3.4-12 min per 20-label Ward
-scene (~3 ms per pass; median 5.2 min over the 20 committed scenes); Phong's
-scenes cost about 3.5× Ward's at the same labels (the full-form Jacobian costs
-2.7× Ward's per point, and its LM runs take more passes: 12-17 min per 10-label
-Phong scene with a third process on the two cores, ~9 core-minutes). With the
-time growing about linearly with the labels that is ~9 core-hours for Ward and
-~30 for Phong: about 40 core-hours (20 h on two cores) with the 32 concurrent
-seeds of ``lm_multiseed``'s default (measured 1.5× faster than one seed at a
-time on one 20-label Ward scene, the optima bit for bit the same). Ten iterations per
-seed: ~25 s per 20-label Ward scene. The thesis needed 1.3-5 h per scene.
+Full run: about 20 h on two cores (40 core-hours, below). 160 scenes (2 models × 4 label
+counts × 20) × 512 seeds run to convergence (50-120 thousand residual-and-Jacobian
+passes per scene) at 100×100 pixels plus a maximiser per scene, on one core of the
+2-core AMD EPYC (Dec 2026), each scene beside another study on the other core: 3.4-12
+min per 20-label Ward scene (~3 ms per pass; median 5.2 min over the 20 committed
+scenes); Phong's scenes cost about 3.5× Ward's at the same labels (the full-form
+Jacobian costs 2.7× Ward's per point, and its LM runs take more passes: 12-17 min per
+10-label Phong scene with a third process on the two cores, ~9 core-minutes). With the
+time growing about linearly with the labels that is ~9 core-hours for Ward and ~30 for
+Phong: about 40 core-hours (20 h on two cores) with the 32 concurrent seeds of
+``lm_multiseed``'s default (measured 1.5× faster than one seed at a time on one 20-label
+Ward scene, the optima bit for bit the same). Ten iterations per seed: ~25 s per
+20-label Ward scene. The thesis needed 1.3-5 h per scene.
 """
 
 from __future__ import annotations
@@ -224,7 +224,7 @@ def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
 
 STUDY = Study(
     name="lm_multiseed",
-    # 2: issue 12/13 changed sampler defaults and thesis2 (old trials must not resume)
+    # 2: sampler defaults and the thesis2 reading changed (old trials must not resume)
     version=2,
     doc=__doc__,
     config={"n_trials": 20, "seed": 732},

@@ -197,7 +197,8 @@ def figures(results: list[xr.Dataset], config: dict, out_dir: Path) -> list[str]
             filled = [ax for ax in axes[0] if ax.get_legend_handles_labels()[0]]
             if filled:  # a cell with no trials yet leaves its panel empty
                 filled[-1].legend(fontsize=6)
-            fig.suptitle(f"PMC `{variant}` on {brdf} ({config['surfaces'][brdf]} surfaces)")
+            fig.suptitle(f"PMC, {variant} variant, on {brdf} ({config['surfaces'][brdf]} "
+                         "surfaces)")
             figs.append(save_figure(fig, out_dir / f"pmc_{brdf}_{variant}.png"))
     return figs
 
@@ -322,7 +323,7 @@ def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
 
 STUDY = Study(
     name="pmc_convergence",
-    # 2: issue 12/13 changed sampler defaults and thesis2 (old trials must not resume)
+    # 2: sampler defaults and the thesis2 reading changed (old trials must not resume)
     version=2,
     doc=__doc__,
     config={"n_trials": 100, "seed": 741},

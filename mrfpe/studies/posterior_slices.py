@@ -148,7 +148,7 @@ def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
 
 STUDY = Study(
     name="posterior_slices",
-    # 2: issue 12/13 changed sampler defaults and thesis2 (old trials must not resume)
+    # 2: sampler defaults and the thesis2 reading changed (old trials must not resume)
     version=2,
     doc=__doc__,
     config={"n_trials": 1, "seed": 715},

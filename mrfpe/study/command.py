@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import sys
+import textwrap
 from pathlib import Path
 from typing import Any
 
+from mrfpe._terminal import WIDTH, plain, shorten, table
 from mrfpe.study.config import canonical
 from mrfpe.study.discovery import available, get
 from mrfpe.study.runner import run
@@ -15,41 +17,56 @@ from mrfpe.study.spec import Study
 __all__ = ["cli", "default_out_dir", "list_text", "settings_text"]
 
 
-def _columns(head: tuple[str, ...], rows: list[tuple[str, ...]]) -> str:
-    w = [max(len(r[i]) for r in [*rows, head]) for i in range(len(head) - 1)]
-    fmt = "  ".join(f"{{:<{n}}}" for n in w) + "  {}"
-    lines = [fmt.format(*head)]
-    lines.append("-" * len(lines[0]))
-    lines += [fmt.format(*r) for r in rows]
-    return "\n".join(lines)
+def list_text(verbose: bool = False) -> str:
+    """The table of ``mrfpe study list``: name, trials, full-run time, description.
 
-
-def list_text() -> str:
-    """The table of ``mrfpe study list``: name, trials, full-run time, description."""
+    At most :data:`~mrfpe._terminal.WIDTH` columns; the full-run column holds the time
+    only, ``verbose`` adds its explanation (``mrfpe study show NAME`` has everything).
+    """
     from mrfpe.study.config import resolve_config
 
     broken: dict[str, str] = {}
     studies = available(broken)
-    rows = [(s.name, str(len(tasks(s, resolve_config(s)))), s.full_run, s.summary)
+    when = (lambda s: plain(s.full_run)) if verbose else (lambda s: _run_time(s.full_run))
+    rows = [(s.name, str(len(tasks(s, resolve_config(s)))), when(s), plain(s.summary))
             for s in studies.values()]
     rows += [(name, "–", "–", f"BROKEN: {err}") for name, err in broken.items()]
     if not rows:
         return "no studies found"
-    return _columns(("name", "trials", "full run", "description"), rows)
+    if verbose:  # the long column is "full run": give it the room, one study per block
+        return "\n\n".join(
+            "\n".join(textwrap.wrap(f"{n} ({t} trials): {d}", WIDTH, subsequent_indent="  ")
+                      + textwrap.wrap(f"full run: {w}", WIDTH, initial_indent="  ",
+                                      subsequent_indent="  "))
+            for n, t, w, d in rows)
+    return table(("name", "trials", "full run", "description"), rows)
+
+
+def _run_time(full_run: str) -> str:
+    """The time of a full run, without its explanation ("about 14 h on two cores")."""
+    text = plain(full_run).split(" (", 1)[0].split(",", 1)[0].split(";", 1)[0]
+    return shorten(text, 28)
 
 
 def settings_text(study: Study) -> str:
-    """The table of ``mrfpe study show NAME``: every setting, its type, default, help."""
-    rows = []
+    """The text of ``mrfpe study show NAME``: every setting with its type, default,
+    ``--quick`` value and meaning, one block per setting, at most 100 columns."""
+    def wrap(text: str, indent: str = "") -> list[str]:
+        return textwrap.wrap(text, WIDTH, initial_indent=indent, subsequent_indent=indent
+                             or "  ")
+
+    lines = wrap(f"{study.name}: {plain(study.summary)}") + wrap(
+        f"Full run: {plain(study.full_run)}") + [""]
     for s in study.settings:
-        quick = canonical(study.quick[s.name]) if s.name in study.quick else ""
         allowed = s.valid_choices()
-        help_ = s.help + (f" [one of: {', '.join(map(str, allowed))}]" if allowed else "")
-        grid = " (grid)" if s.name in study.grid else ""
-        rows.append((s.name + grid, s.kind, canonical(s.default), quick, help_))
-    return (f"{study.name}: {study.summary}\nFull run: {study.full_run}\n\n"
-            + _columns(("setting", "type", "default", "--quick", "meaning"), rows)
-            + "\n\nChange one with --set NAME=VALUE (the value as JSON where it parses).")
+        grid = ", a grid axis" if s.name in study.grid else ""
+        quick = (f"; --quick {canonical(study.quick[s.name])}" if s.name in study.quick
+                 else "")
+        lines += wrap(f"{s.name} ({s.kind}{grid}): default {canonical(s.default)}{quick}")
+        lines += wrap(plain(s.help) + (f" [one of: {', '.join(map(str, allowed))}]"
+                                       if allowed else ""), "    ")
+    lines += ["", "Change one with --set NAME=VALUE (the value as JSON where it parses)."]
+    return "\n".join(lines)
 
 
 def default_out_dir(study: Study, quick: bool) -> Path:
@@ -66,7 +83,7 @@ def cli(args: Any) -> int:
     from mrfpe.study.config import resolve_config
 
     if args.study_command == "list":
-        print(list_text())
+        print(list_text(verbose=getattr(args, "verbose", False)))
         return 0
     study = get(args.name)
     if args.study_command == "show":
@@ -82,7 +99,7 @@ def cli(args: Any) -> int:
         print(summary.table)
         print(f"report: {out / 'report.md'}")
         return 0
-    print(f"study {study.name} ({study.source}); full run: {study.full_run}")
+    print(f"study {study.name} ({study.source}); full run: {_run_time(study.full_run)}")
     try:
         report = run(study, config, out, scheduler=args.scheduler, progress=True,
                      log=lambda msg: print(msg, file=sys.stderr))

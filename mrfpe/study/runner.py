@@ -16,6 +16,8 @@ import os
 import socket
 import time
 import traceback
+import warnings
+from collections import Counter
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -229,12 +231,32 @@ def run(study: Study, config: Mapping[str, Any], out_dir: str | os.PathLike, *,
             note(msg)
         provenance = versions()
         _write_manifest(study, config, out, len(todo), provenance)
-        _run_pending(study, config, pending, trials_dir, provenance, report, client, progress)
+        with _warnings_in_one_line(progress and client is None and bool(pending),
+                                   report.notes.append):
+            _run_pending(study, config, pending, trials_dir, provenance, report, client,
+                         progress)
         if report.ok and summarise:
             results = [open_dataset(result_path(trials_dir, t.stem), "trial") for t in todo]
             report.table = study.summarise(results, dict(config), out) or ""
     report.wall_time_s = time.perf_counter() - t0
     return report
+
+
+@contextlib.contextmanager
+def _warnings_in_one_line(active: bool, note: Callable[[str], None]) -> Iterator[None]:
+    """Hold the trials' warnings while a progress bar is drawn, then note them as one
+    line per run, counted by category and cause (the text before the first colon)."""
+    if not active:
+        yield
+        return
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        yield
+    if caught:
+        causes = Counter((w.category.__name__, str(w.message).split(":", 1)[0])
+                         for w in caught)
+        note(f"{len(caught)} warning(s) during the trials: " + "; ".join(
+            f"{cat} ×{n} ({cause})" for (cat, cause), n in causes.most_common()))
 
 
 def _run_pending(study: Study, config: Mapping[str, Any], pending: list[Task], trials_dir: Path,

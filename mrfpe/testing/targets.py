@@ -215,7 +215,7 @@ class MostlyMinusInf(Target):
 
 
 class BoxGaussian(Target):
-    """N(mean, cov) in the unit cube, far from every face (issue 12's accuracy targets).
+    """N(mean, cov) in the unit cube, far from every face (the accuracy suite's targets).
 
     The normaliser is 1 to within the mass beyond 5 sd, so ``log_evidence`` should be 0;
     :func:`box_gaussian` builds the 3-D correlated and the 10-D AR(1) instances.

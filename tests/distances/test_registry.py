@@ -76,7 +76,13 @@ def test_front_doors_agree():
 def test_table_shows_kind_symmetry_and_parameters(capsys):
     text = distances.table()
     assert registry.table() == text
-    lines = {line.split()[0]: line for line in text.splitlines()[2:]}
+    lines: dict[str, str] = {}  # name -> its row with the wrapped continuation lines
+    for line in text.splitlines()[2:]:
+        if line[:1].strip():
+            name = line.split()[0]
+            lines[name] = line
+        else:
+            lines[name] += " " + line.strip()
     assert set(distances.available()) <= set(lines)
     assert "[distance, asymmetric] alpha=0.7 eps=1e-09 min_var=1e-12" in lines["chernoff"]
     assert "[similarity, symmetric] sigma=0.005 form='weighted'" in lines["agmmp"]
@@ -97,7 +103,7 @@ def test_local_plugins_work_everywhere(local_plugins):
     S = similarity_matrix(sets, "duck", n_jobs=2)
     expect = -np.array([[DuckDistance()(x, y) for y in sets] for x in sets])
     np.testing.assert_allclose(S, expect)
-    assert "[similarity, asymmetric] scale=1.0" in distances.table()
+    assert "[similarity, asymmetric] scale=1.0" in " ".join(distances.table().split())
 
 
 class NoKind:
@@ -189,7 +195,7 @@ def test_cli_compare_passes_parameters(tmp_path, capsys):
     save(b, tmp_path / "b.nc")
     assert main(["compare", str(tmp_path / "a.nc"), str(tmp_path / "b.nc"),
                  "--distance", "chernoff", "--param", "alpha=0.4"]) == 0
-    assert float(capsys.readouterr().out) == pytest.approx(
+    assert float(capsys.readouterr().out.split(": ")[-1].split()[0]) == pytest.approx(
         mrfpe.distance("chernoff", a, b, alpha=0.4), rel=1e-12)
     assert main(["compare", str(tmp_path / "a.nc"), str(tmp_path / "b.nc"),
                  "--distance", "chernoff", "--param", "alpha=4"]) == 2

@@ -1,6 +1,6 @@
 """The other thesis samplers on the same scenes: PMC (I), SIR alternative, PPF, R/Q-type DW.
 
-Brief check for issue 13, item 1: do PMC (I) (6.6.1, 6.66), the alternative
+A brief check: do PMC (I) (6.6.1, 6.66), the alternative
 SIR (5.2.2, 5.29-5.31), PPF (5.3, 5.32-5.35) and R/Q-type dynamically weighted
 MCMC (5.48, 5.49) with the literal initial weight Π₀ = ϱ(θ₀) (7.13,
 ``initial_weight="absolute"``) behave as the thesis reports? Library samplers

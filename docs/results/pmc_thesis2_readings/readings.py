@@ -1,6 +1,6 @@
 """Readings of the thesis's PMC (II) (6.6.2, eq. 6.67 with the importance functions 7.9).
 
-Issue 13, item 1: which reading of 6.6.2 / 6.67 / 7.9 reproduces Table 7.1?
+Which reading of 6.6.2 / 6.67 / 7.9 reproduces Table 7.1?
 This script is standalone (it does not touch ``mrfpe/``): it rebuilds the
 ``pmc_convergence`` study's synthetic Ward scenes (same seeds as the committed
 run in ``docs/results/pmc_convergence_ward20``) and runs each reading of the

@@ -9,10 +9,10 @@ __all__ = ["THESIS2_POWER", "THESIS_POWER", "partition_or_none", "softened"]
 #: Default softening power (5.69) of the thesis's algorithms (PMC (I)/(II), PPF, SIR
 #: 5.2.2). The thesis does not state its value; a prototype measured that with PMC (II)
 #: powers >= 0.03 collapse the cloud into bad regions and <= 0.01 leave it diffuse
-#: (issue 3), so the largest non-collapsing value.
+#: (an early measurement), so the largest non-collapsing value.
 THESIS_POWER = 0.01
 
-#: Softening power of PMC (II) read as compounding (``PMC(variant="thesis2")``): on the
+#: Softening power of PMC (II) read as compounding (``PMC(variant="thesis2")``). On the
 #: ``pmc_convergence`` study's 100×100, 20-label Ward scenes, l = 1e-4 reproduces Table
 #: 7.1's fall of the MAP distance (30 scenes: 0.260 → 0.141, the thesis 0.286 → 0.104) and
 #: its weight variances (median 8.3e-6 → 1.3e-8, the thesis 3.6e-6 → 1.8e-8); l = 1e-3

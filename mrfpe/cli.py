@@ -96,7 +96,7 @@ def _distances(args: argparse.Namespace) -> int:
 def _models(args: argparse.Namespace) -> int:
     from mrfpe.models import registry
 
-    print(registry.table())
+    print(registry.table(verbose=args.verbose))
     return 0
 
 
@@ -201,7 +201,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=_samplers)
     s = sub.add_parser("distances", help="list registered distances", parents=[verbose])
     s.set_defaults(func=_distances)
-    s = sub.add_parser("models", help="list registered models (declared MRFs)")
+    s = sub.add_parser("models", help="list registered models (declared MRFs)",
+                       parents=[verbose])
     s.set_defaults(func=_models)
 
     e = sub.add_parser("estimate", help="sample a target built from a scene netCDF file")

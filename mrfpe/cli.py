@@ -1,4 +1,4 @@
-"""The mrfpe command line: demo, samplers, distances, estimate, compare, study, warmup.
+"""The mrfpe command line: demo, samplers, distances, models, estimate, compare, study, warmup.
 
 Every command checks all of its inputs (files readable and of the right kind,
 output paths writable, settings known and well-typed) before its first

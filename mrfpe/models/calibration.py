@@ -12,19 +12,23 @@ curvature is not the likelihood's. With a simulator both can be corrected:
   f(y_k|θ) - log f(y_k|θ0))``, maximised inside the region where the importance
   weights keep an effective sample size of at least a fifth of the draws, and
   iterated from the new point until it stops moving;
-* :class:`AdjustedPL` -- the curvature- and mode-adjusted pseudolikelihood of
-  Stoehr & Friel (2015) and Bouranis, Friel & Maire (2017):
-  ``PL_adj(θ) = PL(θ_PL + W (θ - θ_ML))`` with ``W = M⁻¹N``, where ``-∇²
-  log PL(θ_PL) = MᵀM`` and ``I(θ_ML) = NᵀN``, so that its mode is the MLE and its
-  Hessian there is the Fisher information. With a flat prior it is a Gaussian-
-  accurate approximation of the posterior, at the PL's cost per evaluation.
+* :class:`AdjustedPL` -- the calibrated pseudolikelihood ``PL_adj(θ) = PL(c + W (θ -
+  θ*))``, at the PL's cost per evaluation. ``align="mode"`` is the curvature- and
+  mode-adjustment of Stoehr & Friel (2015) and Bouranis, Friel & Maire (2017):
+  ``c = θ_PL``, ``θ* = θ_ML``, ``W = M⁻¹N`` with ``-∇² log PL(θ_PL) = MᵀM`` and
+  ``I(θ_ML) = NᵀN``, so that its mode is the MLE and its Hessian there the Fisher
+  information. ``align="moments"`` (the default) maps the PL posterior's mean and
+  covariance onto the likelihood posterior's third-order mean ``θ_ML + δ`` and
+  ``I⁻¹`` instead, so that the PL's skew does not move the mean.
 * :func:`parametric_bootstrap` -- the sampling distribution of the MPLE by
   simulating data at the MPLE and refitting (as R's ngspatial does).
 
 Assumptions, and when it fails: the adjustment is exact for a Gaussian
-posterior; it keeps the PL's *shape* beyond the curvature (skewness and tails
-are the PL's); it needs interior modes (an MPLE on the box's face, e.g. for a
-configuration of one state only, is refused) and a non-singular Fisher
+posterior; it keeps the PL's *shape* beyond the first two moments (skewness and
+tails are the PL's, so near a critical coupling on a small lattice the spread of
+a skewed exact posterior is underestimated); it needs interior modes (an MPLE on
+the box's face, e.g. for a configuration of one state only, is refused) and a
+non-singular Fisher
 information (refused, naming the statistic that does not vary); and the draws
 must come from a chain that has mixed (their number, burn-in and thinning
 follow the measured autocorrelation time, :mod:`mrfpe.models.mixing`).
@@ -113,9 +117,17 @@ def _scores(lik: Any, theta: np.ndarray, y: np.ndarray, h: np.ndarray) -> np.nda
     return ((lf[:d] - lf[d:]) / (2 * h)[:, None]).T
 
 
-def _step(lik: Any) -> np.ndarray:
-    b = np.asarray(lik.bounds, dtype=np.float64)
-    return 1e-4 * (b[:, 1] - b[:, 0])
+def _step(target: Any, theta: np.ndarray | None = None) -> np.ndarray:
+    """Finite-difference steps: 1e-4 of the parameter's scale, at most 1e-4 of its range.
+
+    The scale is ``|θ|`` (at least 1 % of the range), so that a wide box (say a
+    precision in ``(0, 10^4)``) does not step across the point's own magnitude.
+    """
+    b = np.asarray(target.bounds, dtype=np.float64)
+    width = b[:, 1] - b[:, 0]
+    if theta is None:
+        return 1e-4 * width
+    return 1e-4 * np.minimum(width, np.maximum(np.abs(theta), 1e-2 * width))
 
 
 def fisher_information(lik: Any, draws: Draws) -> np.ndarray:
@@ -124,7 +136,7 @@ def fisher_information(lik: Any, draws: Draws) -> np.ndarray:
     Raises ValueError naming the parameter whose score does not vary (a singular
     information: the data cannot identify it).
     """
-    s = _scores(lik, draws.theta, draws.y, _step(lik))
+    s = _scores(lik, draws.theta, draws.y, _step(lik, draws.theta))
     cov = np.atleast_2d(np.cov(s, rowvar=False))
     M = int(getattr(lik, "n_observations", 1))
     info = M * cov
@@ -232,6 +244,17 @@ class AdjustedPL(Target):
         MPLE (curvature only; Stoehr & Friel's curvature adjustment). A single
         Fisher-scoring step from the MPLE is not offered: near the critical
         coupling it overshoots by many posterior sd (measured on an 8 x 8 Ising).
+    align : "moments" | "mode"
+        ``"mode"`` (Bouranis et al. 2017): the adjusted target's mode is the MLE and
+        its Hessian there the Fisher information. ``"moments"`` (default): its mean
+        is the likelihood's posterior mean to third order -- the MLE plus the skew
+        term ``δ = ½ Σ ℓ₃ Σ`` (Tierney & Kadane 1986) from the simulations' third
+        cumulants -- and its covariance the inverse Fisher information: the PL
+        posterior's mean and covariance (adaptive importance sampling of exp(PL),
+        thousands of cheap PL evaluations) are mapped onto them. Where the
+        posterior is skewed (near a critical coupling) the mode alignment carries
+        the PL's skew into the mean: on 10 x 10 Ising data sets at couplings 0.3 and
+        0.44 its mean was 0.4-0.9 exact sd off, the moment alignment's 0.0-0.4.
     n_draws : int
         Simulations per Fisher information / MCMC-MLE round.
     seed : int
@@ -240,8 +263,8 @@ class AdjustedPL(Target):
 
     data_kind = "configurations"
 
-    def __init__(self, pl: Any, lik: Any, *, mode: str = "mcmc_mle", n_draws: int = 1000,
-                 seed: int = 0) -> None:
+    def __init__(self, pl: Any, lik: Any, *, mode: str = "mcmc_mle", align: str = "moments",
+                 n_draws: int = 1000, seed: int = 0) -> None:
         self.pl, self.lik = pl, lik
         self.param_names = tuple(pl.param_names)
         self.bounds = np.asarray(pl.bounds, dtype=np.float64)
@@ -249,13 +272,17 @@ class AdjustedPL(Target):
         self.cost = float(getattr(pl, "cost", 1.0))
         if mode not in ("mcmc_mle", "mple"):
             raise ValueError(f"mode must be 'mcmc_mle' or 'mple'; got {mode!r}")
-        self.mode = mode
+        if align not in ("mode", "moments"):
+            raise ValueError(f"align must be 'mode' or 'moments'; got {align!r}")
+        self.mode, self.align = mode, align
         self.mle = None
         b = self.bounds
         # a grid of at most ~4096 points whatever the dimension, then the local polish
         theta_pl, _ = maximise(pl, grid=max(3, int(4096 ** (1 / b.shape[0]))), seed=seed)
-        h = _step(pl)
-        H = -_hessian(pl._log_prob, theta_pl, h)
+        H = -_hessian(pl._log_prob, theta_pl, _step(pl, theta_pl))
+        if not np.all(np.isfinite(H)):
+            raise ValueError(f"the PL's Hessian at the MPLE {theta_pl.round(4).tolist()} is not "
+                             f"finite: the MPLE is at the edge of the model's valid region")
         dist = np.minimum(theta_pl - b[:, 0], b[:, 1] - theta_pl)
         try:
             m_chol = np.linalg.cholesky(H).T  # H = MᵀM
@@ -281,17 +308,27 @@ class AdjustedPL(Target):
             draws = simulate_draws(lik, theta_pl, n_draws, seed=int(rng.integers(2**63)))
             info, sims = fisher_information(lik, draws), draws.n_sweeps
             theta_ml = theta_pl
-        n_chol = np.linalg.cholesky(info).T  # I = NᵀN
+        l_info = np.linalg.cholesky(info)  # I = L_I L_Iᵀ
+        if align == "mode":  # Aᵀ H A = I: the Hessian at the mode is the Fisher information
+            self.centre = theta_pl
+            self.W = np.linalg.solve(m_chol, l_info.T)
+        else:  # A⁻¹ C A⁻ᵀ = I⁻¹: the covariance is the inverse Fisher information
+            self.centre, cov = _pl_moments(pl, theta_pl, H, rng)
+            self.W = np.linalg.cholesky(cov) @ l_info.T
+            if self.mle is not None:  # mean = MLE + the likelihood's skew (Laplace expansion)
+                theta_ml = theta_ml + _skew_shift(lik, self.mle.draws, info)
         self.theta_pl, self.theta_ml = theta_pl, theta_ml
-        self.W = np.linalg.solve(m_chol, n_chol)
         self.fisher_information, self.pl_hessian = info, H
         self.n_simulation_sweeps = int(sims)
         self._offset = float(pl._log_prob(theta_pl[None])[0])
 
     def to_pl(self, theta: Any) -> np.ndarray:
-        """The PL's argument for adjusted parameters: ``θ_PL + W (θ - θ_ML)``."""
+        """The PL's argument for adjusted parameters: ``c + W (θ - θ_ML)``.
+
+        ``c`` is the MPLE (``align="mode"``) or the PL posterior's mean (``"moments"``).
+        """
         theta = np.atleast_2d(np.asarray(theta, dtype=np.float64))
-        return self.theta_pl + (theta - self.theta_ml) @ self.W.T
+        return self.centre + (theta - self.theta_ml) @ self.W.T
 
     def _row_bytes(self) -> float:
         return self.pl._row_bytes()
@@ -301,9 +338,55 @@ class AdjustedPL(Target):
 
     def describe(self) -> dict:
         return {**self.pl.describe(), "name": self.name, "class": type(self).__name__,
-                "estimator": "pl_adjusted", "mode": self.mode,
+                "estimator": "pl_adjusted", "mode": self.mode, "align": self.align,
                 "theta_mple": self.theta_pl.tolist(), "theta_mode": self.theta_ml.tolist(),
                 "W": self.W.tolist(), "n_simulation_sweeps": self.n_simulation_sweeps}
+
+
+def _skew_shift(lik: Any, draws: Draws, info: np.ndarray) -> np.ndarray:
+    """Posterior mean minus mode of the likelihood under a flat prior, to third order.
+
+    ``δ_i = ½ Σ_ij ℓ_jkl Σ_kl`` with ``Σ = I⁻¹`` and ``ℓ_jkl = -M κ_jkl``, ``κ`` the
+    third cumulant of the score under ``p(y | θ)`` (for a log-linear model, of the
+    sufficient statistics), estimated from the draws (Tierney & Kadane 1986).
+    """
+    s = _scores(lik, draws.theta, draws.y, _step(lik, draws.theta))
+    c = s - s.mean(axis=0)
+    kappa = np.einsum("nj,nk,nl->jkl", c, c, c) / c.shape[0]
+    M = int(getattr(lik, "n_observations", 1))
+    sigma = np.linalg.inv(info)
+    return -0.5 * M * sigma @ np.einsum("jkl,kl->j", kappa, sigma)
+
+
+def _pl_moments(pl: Any, theta_pl: np.ndarray, H: np.ndarray, rng: np.random.Generator,
+                n: int = 8192, rounds: int = 4) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and covariance of exp(PL) on the box by adaptive importance sampling.
+
+    Gaussian proposals, 1.5x wider than the current estimate, start at the
+    Laplace approximation ``N(θ_PL, H⁻¹)`` and follow the weighted moments for
+    ``rounds`` rounds (Cappé et al. 2004's adaptation, one component).
+    """
+    mean, cov = theta_pl.copy(), np.linalg.inv(H)
+    d = theta_pl.size
+    for _ in range(rounds):
+        try:
+            chol = 1.5 * np.linalg.cholesky(cov)
+        except np.linalg.LinAlgError:
+            raise ValueError("the pseudo-posterior's covariance is not positive definite (its "
+                             "importance sample collapsed); use align='mode'") from None
+        z = rng.standard_normal((n, d))
+        th = mean + z @ chol.T
+        log_q = -0.5 * np.sum(z**2, axis=1) - np.log(np.diag(chol)).sum()
+        lw = pl.log_prob(th) - log_q
+        w = np.exp(lw - lw.max())
+        w /= w.sum()
+        ess = 1.0 / np.sum(w**2)
+        mean = w @ th
+        cov = (th - mean).T @ ((th - mean) * w[:, None])
+    if not ess >= n / 20:
+        raise ValueError(f"the pseudo-posterior's moments could not be estimated (importance "
+                         f"ESS {ess:.0f} of {n}); use align='mode'")
+    return mean, cov
 
 
 def parametric_bootstrap(model: Any, data: Any, *, n_boot: int = 200, estimator: str = "pl",

@@ -82,7 +82,10 @@ ESTIMATOR_OPTIONS: dict[str, tuple[Option, ...]] = {
     "pl_adjusted": (*COMMON,
                     Option("mode", "'mcmc_mle' | 'mple'", "mcmc_mle",
                            choice_check("mcmc_mle", "mple"),
-                           "peak at the Monte Carlo MLE, or at the MPLE (curvature only)"),
+                           "centre at the Monte Carlo MLE, or at the MPLE (curvature only)"),
+                    Option("align", "'mode' | 'moments'", "moments",
+                           choice_check("mode", "moments"),
+                           "match mode and Hessian, or mean and covariance, to N(MLE, I^-1)"),
                     Option("n_draws", "int >= 10", 1000,
                            lambda n, v: check_positive_int(n, v, minimum=10),
                            "simulations per Fisher information / MCMC-MLE round"),
@@ -332,8 +335,8 @@ class MRF(Model):
             pl = est.ConditionalTarget(rows=[design.conditional_rows(x)],
                                        nodes=np.arange(design.graph.n_nodes), **common)
             lik = est.LikelihoodTarget(**common)
-            return AdjustedPL(pl, lik, mode=options["mode"], n_draws=options["n_draws"],
-                              seed=options["seed"])
+            return AdjustedPL(pl, lik, mode=options["mode"], align=options["align"],
+                              n_draws=options["n_draws"], seed=options["seed"])
         raise AssertionError(estimator)  # pragma: no cover - check_estimator ran
 
     # -- simulation ------------------------------------------------------------------------------

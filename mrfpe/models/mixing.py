@@ -38,7 +38,12 @@ def autocorrelation_time(target: Any, theta: np.ndarray, *, seed: int,
     ``max_sweeps`` is reached; returns the largest τ over the standardised
     statistics (``inf`` when the chain is shorter than 20 τ at the cap).
     """
+    import logging
+
     from emcee.autocorr import integrated_time
+
+    # emcee logs a caution when the chain is short; this loop judges the length itself
+    logging.getLogger("emcee.autocorr").setLevel(logging.ERROR)
 
     rng = np.random.default_rng(seed)
     x0 = getattr(target, "x", None)

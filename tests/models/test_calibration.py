@@ -44,7 +44,7 @@ def test_mcmc_mle_finds_the_exact_mle(ising):
 
 def test_adjusted_pl_peaks_at_the_mle_with_the_fisher_curvature(ising):
     m, x, _exact, _lik, _pl = ising
-    adj = m.target("pl_adjusted", x, seed=2)
+    adj = m.target("pl_adjusted", x, seed=2, align="mode")
     assert isinstance(adj, AdjustedPL)
     top, _ = maximise(adj)
     np.testing.assert_allclose(top, adj.theta_ml, atol=2e-3)
@@ -72,3 +72,29 @@ def test_parametric_bootstrap_schema_and_spread(ising):
     assert boot.attrs["kind"] == "optima" and boot["theta"].shape == (30, 2)
     spread = boot["theta"].values.std(0)
     assert np.all(spread > 0) and np.all(spread < 1.0)
+
+
+def test_moment_alignment_has_the_mean_and_covariance_it_promises(ising):
+    m, x, exact, _, _ = ising
+    adj = m.target("pl_adjusted", x, seed=2)  # align="moments"
+    sd = np.sqrt(np.diag(np.linalg.inv(adj.fisher_information)))
+    g = [np.linspace(c - 7 * s, c + 7 * s, 141) for c, s in zip(adj.theta_ml, sd, strict=True)]
+    G = np.stack(np.meshgrid(*g, indexing="ij"), -1).reshape(-1, 2)
+    lp = adj.log_prob(G)
+    w = np.exp(lp - lp.max())
+    w /= w.sum()
+    mean = w @ G
+    cov = (G - mean).T @ ((G - mean) * w[:, None])
+    np.testing.assert_allclose(mean, adj.theta_ml, atol=0.05 * sd.min())
+    np.testing.assert_allclose(cov, np.linalg.inv(adj.fisher_information), rtol=0.1,
+                               atol=0.1 * sd.min() ** 2)
+    # and it sits closer to the exact posterior's mean than the mode alignment does
+    e = exact.log_prob(G)
+    we = np.exp(e - e.max())
+    we /= we.sum()
+    exact_mean = we @ G
+    mode = m.target("pl_adjusted", x, seed=2, align="mode")
+    lm = mode.log_prob(G)
+    wm = np.exp(lm - lm.max())
+    wm /= wm.sum()
+    assert np.max(np.abs(mean - exact_mean) / sd) <= np.max(np.abs(wm @ G - exact_mean) / sd)

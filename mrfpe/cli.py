@@ -36,29 +36,15 @@ def parse_assignments(items: Sequence[str], option: str = "--set") -> dict[str, 
 
 
 def _load_scene(path: str) -> Any:
-    from mrfpe.netcdf import open_dataset
     from mrfpe.scene import Scene
 
-    ds = open_dataset(path, "scene")
-    try:
-        return Scene.from_dataset(ds)
-    except (KeyError, ValueError, TypeError, AttributeError) as exc:
-        raise ValueError(f"{path}: not a scene file (written by Scene.save / mrfpe demo): "
-                         f"{type(exc).__name__}: {exc}") from None
+    return Scene.load(path)
 
 
 def _load_posterior(path: str) -> Any:
     from mrfpe import posterior as P
-    from mrfpe.netcdf import check_readable
 
-    check_readable(path, "posterior")
-    try:
-        post = P.load(path)
-    except (OSError, RuntimeError) as exc:  # until posterior.load names the file itself
-        from mrfpe.netcdf import open_dataset
-
-        open_dataset(path, "posterior")  # raises the one-line error
-        raise ValueError(f"{path}: not a readable netCDF posterior file ({exc})") from None
+    post = P.load(path)
     try:
         P.validate(post)
     except ValueError as exc:

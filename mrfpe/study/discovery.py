@@ -27,7 +27,11 @@ def _study_of(module: ModuleType, where: str) -> Study:
 
 
 def load_file(path: str | os.PathLike) -> Study:
-    """Load a study from a Python file that defines ``STUDY``."""
+    """Load a study from a Python file that defines ``STUDY``.
+
+    A file that does not import (a ``SyntaxError``, an exception, a ``sys.exit``)
+    raises ``ValueError`` naming it and the reason.
+    """
     path = Path(path).resolve()
     if not path.is_file():
         raise FileNotFoundError(f"no study file {path}")
@@ -37,9 +41,10 @@ def load_file(path: str | os.PathLike) -> Study:
     sys.modules[mod_name] = module  # so pickling and dataclasses can find it
     try:
         spec.loader.exec_module(module)
-    except Exception:
+    except (Exception, SystemExit) as exc:  # a SyntaxError or a sys.exit in the file: name it
         sys.modules.pop(mod_name, None)
-        raise
+        raise ValueError(f"{path}: cannot load the study file: {type(exc).__name__}: "
+                         f"{exc}") from None
     return _study_of(module, str(path))
 
 
@@ -66,7 +71,7 @@ def available(broken: dict[str, str] | None = None) -> dict[str, Study]:
     def add(name: str, load: Callable[[], Study]) -> None:
         try:
             found[name] = load()
-        except Exception as exc:  # one broken study must not hide the others
+        except (Exception, SystemExit) as exc:  # one broken study must not hide the others
             if broken is not None:
                 broken[name] = f"{type(exc).__name__}: {exc}"
 

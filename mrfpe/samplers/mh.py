@@ -97,7 +97,8 @@ class MetropolisHastings(Sampler):
         rng = np.random.default_rng(seed)
         n, c, d = self.n_steps, self.n_chains, bounds.shape[0]
         lo, hi = bounds[:, 0], bounds[:, 1]
-        run = Run(target, n, progress=progress, callback=callback, desc=self.name)
+        run = Run(target, n, progress=progress, callback=callback, desc=self.name,
+                  rows=n + c * (n // self.thin + self.burn_in + 4))
 
         x, lp = draw_in_support(run, target, rng, c, bounds)
         chol = np.diag(self.proposal_sd * (hi - lo))

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Any
 
 import xarray as xr
 
+from mrfpe.netcdf import DiskFullError
 from mrfpe.study.seeds import Task
 from mrfpe.study.trial import execute
 
@@ -35,12 +36,13 @@ def connect(address: str, timeout: float = CONNECT_TIMEOUT_S) -> Any:
         raise ValueError(f"--scheduler expects an address like tcp://HOST:8786; got {address!r}")
     try:
         return Client(address, timeout=timeout)
-    except (OSError, TimeoutError, ValueError) as exc:
+    except Exception as exc:  # also what a server that is not dask makes the client raise
+        # (a MemoryError for a garbage frame length, a protocol error, ...)
         reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         if len(reason) > 160:
             reason = reason[:157] + "..."
         raise ValueError(f"--scheduler {address}: no dask scheduler reachable within "
-                         f"{timeout:g} s ({reason})") from None
+                         f"{timeout:g} s ({type(exc).__name__}: {reason})") from None
 
 
 def execute_pickled(blob: bytes, study_name: str, config: dict, repeat: int, seed: int,
@@ -109,6 +111,8 @@ def run_on_cluster(study: Study, pending: list[Task], client: Any,
             task = futures.pop(fut)
             try:
                 finish(task, fut.result())
+            except DiskFullError:
+                raise  # stop: no further result could be written either
             except Exception:
                 fail(task, traceback.format_exc())
             fut.release()

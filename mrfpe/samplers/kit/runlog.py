@@ -18,6 +18,7 @@ import numpy as np
 import xarray as xr
 
 from mrfpe.posterior import build
+from mrfpe.targets.budget import check_memory
 
 __all__ = ["Run"]
 
@@ -32,6 +33,10 @@ class Run:
     progress : show a tqdm bar (stderr) with the step's ESS and extra info.
     callback : ``callback(step, info)`` after each step; ``info`` holds ``ess``,
         ``map_log_target``, ``n_target_evals`` and the sampler's extras.
+    rows : how many parameter vectors (particles, kept states, history rows, one
+        float per step) the sampler will hold at once: checked against the memory
+        budget (:func:`mrfpe.targets.memory_budget`) before anything is allocated,
+        so an oversized setting fails at once, not with a bare ``MemoryError``.
     check_first_step : raise at the first :meth:`step` if no point evaluated so far was
         finite (:meth:`require_support`); ``False`` for samplers whose first step sees
         too few points to judge (a multi-start optimiser's first optimum).
@@ -39,11 +44,14 @@ class Run:
 
     def __init__(self, target: Any, n_steps: int | None, *, progress: bool = False,
                  callback: Callable[[int, dict], Any] | None = None, desc: str = "",
-                 check_first_step: bool = True):
+                 rows: float = 0, check_first_step: bool = True):
         if callback is not None and not callable(callback):
             raise ValueError(f"callback must be callable or None; got {callback!r}")
         self.target = target
         self.d = len(target.param_names)
+        check_memory(8.0 * (self.d + 4) * float(rows),
+                     f"sampler {desc or '?'} holding {float(rows):.3g} rows of {self.d} "
+                     "parameters", "lower its sample, chain or step counts")
         self.n_evals = 0.0
         self.n_points = 0  # points evaluated, and whether any was finite (no support?)
         self.seen_finite = False

@@ -83,8 +83,11 @@ def main(out_dir: str | Path = "mrfpe-demo", quick: bool = False, seed: int = 0)
     from mrfpe.studies.report import mean_sd
     from mrfpe.synthetic import make_scene
 
-    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
-        raise ValueError(f"seed must be a non-negative integer; got {seed!r}")
+    from mrfpe.validation import check_seed
+
+    if seed is None:
+        raise ValueError("seed must be an integer in [0, 2**63 - 1]; got None")
+    check_seed(seed)
     out = _prepare(out_dir)
     shape, labels = ((40, 40), 10) if quick else ((100, 100), 20)
     n_samples, n_iterations = (300, 8) if quick else (1000, 20)
@@ -99,8 +102,8 @@ def main(out_dir: str | Path = "mrfpe-demo", quick: bool = False, seed: int = 0)
     truth = np.random.default_rng(seed).uniform(0.1, 0.9, 3)  # unit cube (7.1)
     theta_nat = np.asarray(model.to_natural(truth), dtype=float).reshape(-1)
     scene = make_scene(brdf="ward", theta=theta_nat, shape=shape, n_labels=labels, seed=seed)
+    target = mrfpe.targets.get("pls", scene)  # first: a build over budget writes nothing
     scene.save(out / "scene.nc")
-    target = mrfpe.targets.get("pls", scene)
     t_scene = time.perf_counter() - t0
     say(f"scene: Ward reflectance, {shape[0]}x{shape[1]} pixels, {labels} candidate depths "
         f"(labels) per pixel ({t_scene:.1f} s) -> {out / 'scene.nc'}")

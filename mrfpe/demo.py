@@ -82,7 +82,6 @@ def main(out_dir: str | Path = "mrfpe-demo", quick: bool = False, seed: int = 0)
     from mrfpe.brdf import get as get_brdf
     from mrfpe.studies.report import mean_sd
     from mrfpe.synthetic import make_scene
-
     from mrfpe.validation import check_seed
 
     if seed is None:

@@ -115,7 +115,7 @@ def _estimate(args: argparse.Namespace) -> int:
     cls = get_sampler(args.sampler)
     check_keywords(settings, keyword_names(cls.__init__, 1), f"sampler {args.sampler!r}",
                    "--set")
-    sampler = cls(**settings)
+    cls(**settings)  # the settings' values checked now, before the scene is read
     scene_path = check_readable(args.scene, "scene")
     out = check_writable(args.out, "--out posterior")
     _check_output(out, [scene_path], args.force)
@@ -125,7 +125,7 @@ def _estimate(args: argparse.Namespace) -> int:
     except TypeError as exc:
         raise ValueError(f"--target-option: {exc}") from None
     # through mrfpe.sample: BLAS on one thread, the result checked before it is written
-    post = mrfpe.sample(sampler, target, seed=seed, progress=not args.quiet)
+    post = mrfpe.sample(args.sampler, target, seed=seed, progress=not args.quiet, **settings)
     save(post, out)  # atomic: a kill mid-write never leaves a partial posterior
     m = post["map_theta"].isel(step=-1).values
     print(f"MAP (sampling space): {m.round(4).tolist()}  -> {out}")

@@ -90,12 +90,16 @@ def blas_threads(n: int | None = None) -> Iterator[None]:
     (``threadpoolctl``; about 1.5 ms per entry). ``n=None`` with
     ``BLAS_THREADS = None`` changes nothing.
 
-    Safe across threads: blocks that overlap in several threads share one limit
-    (the first block's ``n``), and the original limits come back when the last
-    of them ends, whatever the order in which they end.
+    Only the main thread changes the limits: OpenBLAS lowers its thread count
+    when asked from any thread but raises it again only when asked from the main
+    one, so a limit set in a worker thread (``mrfpe.sample`` in a thread pool)
+    would stay for the whole process; there BLAS is left as it is. Nested blocks
+    share one limit, and the original limits come back when the outermost ends.
     """
     n = BLAS_THREADS if n is None else n
-    if n is None:
+    if n is None or threading.current_thread() is not threading.main_thread():
+        # OpenBLAS lowers its thread count from any thread but raises it again only from
+        # the main one: a limit set in a worker thread would stay for the process
         yield
         return
     _blas_enter(int(n))

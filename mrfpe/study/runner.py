@@ -223,7 +223,8 @@ def run(study: Study, config: Mapping[str, Any], out_dir: str | os.PathLike, *,
         Called with one-line notes as they arise (stray files removed, unreadable
         trial files recomputed); they are also in :attr:`RunReport.notes`.
     force
-        Run even if ``out_dir`` holds another study (its ``config.json`` names it).
+        Run even if ``out_dir`` holds another study (its ``config.json`` names it);
+        trial files of the same name but another configuration are recomputed.
 
     Raises
     ------
@@ -237,6 +238,8 @@ def run(study: Study, config: Mapping[str, Any], out_dir: str | os.PathLike, *,
     """
     if mismatch not in ("error", "recompute"):
         raise ValueError(f"mismatch must be 'error' or 'recompute'; got {mismatch!r}")
+    if force:  # overwriting is what was asked for: trial files of the same name are replaced
+        mismatch = "recompute"
     t0 = time.perf_counter()
     out = Path(out_dir)
     todo = tasks(study, config)  # first: a trial count beyond the budget creates nothing

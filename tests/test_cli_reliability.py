@@ -136,7 +136,7 @@ def _tmpfs(tmp_path: Path, size: str) -> Path:
     mnt = tmp_path / "fs"
     mnt.mkdir()
     r = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(mnt)],
-                       capture_output=True)
+                       capture_output=True, stdin=subprocess.DEVNULL)
     if r.returncode:
         pytest.skip("cannot mount a tmpfs here (needs root); ENOSPC is simulated elsewhere")
     return mnt
@@ -153,7 +153,8 @@ def test_disk_full_on_a_real_small_tmpfs(scene, tmp_path, capsys):
         assert rc == 1 and "no space left on the device" in err and f"{mnt}/p.nc" in err
         assert sorted(p.name for p in mnt.iterdir()) == ["fill", "scene.nc"]
     finally:
-        subprocess.run(["umount", str(mnt)], check=False)
+        subprocess.run(["umount", str(mnt)], check=False, capture_output=True,
+                       stdin=subprocess.DEVNULL)
 
 
 def test_relative_paths_are_not_mangled(tmp_path, capsys, monkeypatch):
@@ -177,6 +178,7 @@ def test_real_sigint_stops_estimate_promptly_and_leaves_no_file(scene, tmp_path)
     out = tmp_path / "p.nc"
     p = subprocess.Popen([sys.executable, "-m", "mrfpe", "estimate", str(scene), "--out",
                           str(out), "--set", "n_samples=4000", "--set", "n_iterations=10000"],
+                         stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                          stderr=subprocess.PIPE, cwd=tmp_path)
     try:
         first = p.stderr.read(1)  # the progress bar: sampling has started

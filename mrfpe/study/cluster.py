@@ -34,10 +34,19 @@ def connect(address: str, timeout: float = CONNECT_TIMEOUT_S) -> Any:
             from None
     if not isinstance(address, str) or not address.strip():
         raise ValueError(f"--scheduler expects an address like tcp://HOST:8786; got {address!r}")
+    import copy
+
+    import dask
+
+    before = copy.deepcopy(dask.config.config)
     try:
         return Client(address, timeout=timeout)
     except Exception as exc:  # also what a server that is not dask makes the client raise
-        # (a MemoryError for a garbage frame length, a protocol error, ...)
+        # (a MemoryError for a garbage frame length, a protocol error, ...). A client that
+        # failed to start has already made itself dask's default scheduler: undo that, or
+        # every later dask computation in the process asks for a client that is not there.
+        dask.config.config.clear()
+        dask.config.config.update(before)
         reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         if len(reason) > 160:
             reason = reason[:157] + "..."

@@ -26,6 +26,14 @@ def _study_of(module: ModuleType, where: str) -> Study:
     return study
 
 
+class StudyFileError(ValueError):
+    """A study file that does not import; :attr:`reason` is what went wrong in it."""
+
+    def __init__(self, path: Path, reason: str):
+        super().__init__(f"{path}: cannot load the study file: {reason}")
+        self.reason = reason
+
+
 def load_file(path: str | os.PathLike) -> Study:
     """Load a study from a Python file that defines ``STUDY``.
 
@@ -43,8 +51,7 @@ def load_file(path: str | os.PathLike) -> Study:
         spec.loader.exec_module(module)
     except (Exception, SystemExit) as exc:  # a SyntaxError or a sys.exit in the file: name it
         sys.modules.pop(mod_name, None)
-        raise ValueError(f"{path}: cannot load the study file: {type(exc).__name__}: "
-                         f"{exc}") from None
+        raise StudyFileError(path, f"{type(exc).__name__}: {exc}") from None
     return _study_of(module, str(path))
 
 
@@ -73,7 +80,7 @@ def available(broken: dict[str, str] | None = None) -> dict[str, Study]:
             found[name] = load()
         except (Exception, SystemExit) as exc:  # one broken study must not hide the others
             if broken is not None:
-                broken[name] = f"{type(exc).__name__}: {exc}"
+                broken[name] = getattr(exc, "reason", f"{type(exc).__name__}: {exc}")
 
     for name in _builtin_names():
         mod = f"mrfpe.studies.{name}"

@@ -39,6 +39,8 @@ def connect(address: str, timeout: float = CONNECT_TIMEOUT_S) -> Any:
     import dask
 
     before = copy.deepcopy(dask.config.config)
+    clients = _registered_clients()
+    known = set(clients)
     try:
         return Client(address, timeout=timeout)
     except Exception as exc:  # also what a server that is not dask makes the client raise
@@ -47,11 +49,23 @@ def connect(address: str, timeout: float = CONNECT_TIMEOUT_S) -> Any:
         # every later dask computation in the process asks for a client that is not there.
         dask.config.config.clear()
         dask.config.config.update(before)
+        for key in set(clients) - known:  # nor may it stay registered as the default client
+            clients.pop(key, None)
         reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         if len(reason) > 160:
             reason = reason[:157] + "..."
         raise ValueError(f"--scheduler {address}: no dask scheduler reachable within "
                          f"{timeout:g} s ({type(exc).__name__}: {reason})") from None
+
+
+def _registered_clients() -> dict:
+    """distributed's registry of live clients (what dask falls back to as the default
+    scheduler); an empty dict where this version keeps none."""
+    try:
+        from distributed.client import _global_clients
+    except ImportError:  # pragma: no cover - other distributed layouts
+        return {}
+    return _global_clients
 
 
 def execute_pickled(blob: bytes, study_name: str, config: dict, repeat: int, seed: int,

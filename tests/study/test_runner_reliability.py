@@ -171,3 +171,8 @@ def test_a_scheduler_that_is_not_dask_is_one_line(tmp_path):
     finally:
         stop.set()
         server.close()
+    # the failed client left nothing behind that later dask computations would use
+    import dask
+    from distributed.client import _global_clients
+
+    assert dask.config.get("scheduler", None) is None and not _global_clients

@@ -28,27 +28,35 @@ def sample(sampler: Any, target: Any, *, seed: int | None = None, progress: bool
     holds the keyword settings for a name or a class, e.g.
     ``mrfpe.sample("pmc", target, seed=0, n_samples=1000, n_iterations=20)``;
     an instance carries its own (passing ``config`` with one is a ``TypeError``).
-    A setting the sampler does not take is a ``ValueError`` naming the nearest one.
-    BLAS runs on one thread meanwhile (:func:`mrfpe.threads.blas_threads`).
+    A setting the sampler does not take is a ``ValueError`` naming the nearest one;
+    so is a ``seed`` outside [0, 2**63 - 1], before the run. The result is checked
+    against the posterior schema before it is returned
+    (:func:`mrfpe.samplers.check_result`): a plugin returning anything else is a
+    ``ValueError`` naming it. BLAS runs on one thread meanwhile
+    (:func:`mrfpe.threads.blas_threads`).
     """
     import inspect
 
-    from mrfpe.samplers import get, validate_sampler
+    from mrfpe.samplers import check_result, get, validate_sampler
     from mrfpe.threads import blas_threads
-    from mrfpe.validation import check_keywords, keyword_names
+    from mrfpe.validation import check_keywords, check_seed, keyword_names
 
+    seed = check_seed(seed)
     if isinstance(sampler, str) or inspect.isclass(sampler):
         cls = get(sampler)
         check_keywords(config, keyword_names(cls.__init__, 1), f"sampler {cls.__name__}")
         instance = cls(**config)
+        name = sampler if isinstance(sampler, str) else cls.__name__
     else:
         validate_sampler(type(sampler))
         if config:
             raise TypeError(f"configuration {sorted(config)} given with an already constructed "
                             f"sampler {sampler!r}; pass the class or a name instead")
         instance = sampler
+        name = getattr(instance, "name", "") or type(instance).__name__
     with blas_threads():
-        return instance.run(target, seed=seed, progress=progress, callback=callback)
+        post = instance.run(target, seed=seed, progress=progress, callback=callback)
+    return check_result(post, name)
 
 
 def distance(name: str, a: Any, b: Any, **params: Any) -> float:

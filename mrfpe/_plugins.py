@@ -3,8 +3,11 @@
 Modelled on xarray's backend plugins: every extension (built-in or third-party)
 is a plain class registered under an entry-point group in some package's
 ``pyproject.toml``. Discovery imports each entry point once, validates its
-interface, and records failures as *broken* entries instead of raising, so one
-bad plugin never takes down the others or the command line.
+interface, and records failures as *broken* entries instead of raising (a
+``sys.exit`` on import included), so one bad plugin never takes down the others
+or the command line. A plugin that registers a built-in's name is listed as
+broken and warned about, naming both distributions; the built-in keeps the name,
+whatever the order of ``sys.path``.
 
 Plugin modules must import heavy optional dependencies lazily (inside
 ``run``/``__call__``), so that listing stays cheap.
@@ -40,6 +43,14 @@ class PluginInfo:
     @property
     def ok(self) -> bool:
         return self.error is None
+
+
+#: The distribution whose entry points are the built-ins: their names cannot be taken over.
+BUILTIN_PACKAGE = "mrfpe"
+
+
+def _is_builtin(info: PluginInfo) -> bool:
+    return info.package == BUILTIN_PACKAGE and info.target.startswith(f"{BUILTIN_PACKAGE}.")
 
 
 def first_doc_line(obj: Any) -> str:
@@ -91,7 +102,8 @@ class Registry:
         try:
             obj = ep.load()
             self._validate(obj)
-        except Exception as exc:  # a broken plugin must not break discovery
+        except (Exception, SystemExit) as exc:  # a broken plugin must not break discovery,
+            # nor end the process by calling sys.exit on import
             return PluginInfo(ep.name, ep.value, package, version, "", None,
                               f"{type(exc).__name__}: {exc}")
         return PluginInfo(ep.name, ep.value, package, version, first_doc_line(obj), obj)
@@ -107,12 +119,16 @@ class Registry:
                 seen.add((ep.name, ep.value))
                 info = self._load(ep)
                 if ep.name in found:
-                    other = found[ep.name]
+                    kept, dup = found[ep.name], info
+                    if _is_builtin(dup) and not _is_builtin(kept):
+                        kept, dup = dup, kept  # a built-in name is never taken over
                     msg = (f"duplicate {self.kind} name {ep.name!r}: registered by "
-                           f"{other.package} ({other.target}) and {info.package} ({info.target})")
-                    info = PluginInfo(info.name, info.target, info.package, info.version,
-                                      info.description, None, msg)
-                    found[f"{ep.name} [{info.package}]"] = info
+                           f"{kept.package} {kept.version} ({kept.target}) and {dup.package} "
+                           f"{dup.version} ({dup.target}); {kept.package}'s is kept")
+                    found[ep.name] = kept
+                    found[f"{ep.name} [{dup.package}]"] = PluginInfo(
+                        dup.name, dup.target, dup.package, dup.version, dup.description, None,
+                        msg)
                     continue
                 found[ep.name] = info
             self._entries = found

@@ -9,6 +9,7 @@ expensive step. Usage and input errors print one line, ``mrfpe CMD: error:
 from __future__ import annotations
 
 import argparse
+import errno
 import sys
 from collections.abc import Sequence
 from typing import Any
@@ -36,29 +37,15 @@ def parse_assignments(items: Sequence[str], option: str = "--set") -> dict[str, 
 
 
 def _load_scene(path: str) -> Any:
-    from mrfpe.netcdf import open_dataset
     from mrfpe.scene import Scene
 
-    ds = open_dataset(path, "scene")
-    try:
-        return Scene.from_dataset(ds)
-    except (KeyError, ValueError, TypeError, AttributeError) as exc:
-        raise ValueError(f"{path}: not a scene file (written by Scene.save / mrfpe demo): "
-                         f"{type(exc).__name__}: {exc}") from None
+    return Scene.load(path)
 
 
 def _load_posterior(path: str) -> Any:
     from mrfpe import posterior as P
-    from mrfpe.netcdf import check_readable
 
-    check_readable(path, "posterior")
-    try:
-        post = P.load(path)
-    except (OSError, RuntimeError) as exc:  # until posterior.load names the file itself
-        from mrfpe.netcdf import open_dataset
-
-        open_dataset(path, "posterior")  # raises the one-line error
-        raise ValueError(f"{path}: not a readable netCDF posterior file ({exc})") from None
+    post = P.load(path)
     try:
         P.validate(post)
     except ValueError as exc:
@@ -100,6 +87,30 @@ def _models(args: argparse.Namespace) -> int:
     return 0
 
 
+def _check_output(out: Any, inputs: Sequence[Any], force: bool) -> None:
+    """Refuse an ``--out`` that is one of the inputs, or (without ``--force``) an existing
+    file that is not a posterior: nothing is overwritten that was not meant to be."""
+    import os
+
+    from mrfpe.netcdf import read_attrs
+
+    if not os.path.lexists(out):
+        return
+    for path in inputs:
+        if os.path.samefile(out, path):
+            raise ValueError(f"--out {out} is the input file {path}; writing there would "
+                             "replace it: choose another --out")
+    if force:
+        return
+    try:
+        attrs = read_attrs(out, "posterior")
+    except ValueError:
+        attrs = {}
+    if "sampler" not in attrs or "mrfpe_version" not in attrs:
+        raise ValueError(f"--out {out} exists and is not a posterior file written by mrfpe; "
+                         "refusing to overwrite it (pass --force to replace it)")
+
+
 def _estimate(args: argparse.Namespace) -> int:
     import numpy as np
 
@@ -107,6 +118,7 @@ def _estimate(args: argparse.Namespace) -> int:
     from mrfpe.netcdf import check_readable, check_writable
     from mrfpe.posterior import save
     from mrfpe.samplers import get as get_sampler
+    from mrfpe.validation import check_seed
 
     # Everything cheap first: settings, paths, the scene; sampling last.
     settings = parse_assignments(args.set, "--set")
@@ -114,18 +126,21 @@ def _estimate(args: argparse.Namespace) -> int:
     if args.target not in mrfpe.targets.names():
         raise ValueError(f"--target: unknown target {args.target!r}; available: "
                          f"{', '.join(mrfpe.targets.names())}")
+    seed = check_seed(args.seed, "--seed")
     cls = get_sampler(args.sampler)
     check_keywords(settings, keyword_names(cls.__init__, 1), f"sampler {args.sampler!r}",
                    "--set")
-    sampler = cls(**settings)
-    check_readable(args.scene, "scene")
+    cls(**settings)  # the settings' values checked now, before the scene is read
+    scene_path = check_readable(args.scene, "scene")
     out = check_writable(args.out, "--out posterior")
+    _check_output(out, [scene_path], args.force)
     scene = _load_scene(args.scene)
     try:
         target = mrfpe.targets.get(args.target, scene, **target_options)
     except TypeError as exc:
         raise ValueError(f"--target-option: {exc}") from None
-    post = sampler.run(target, seed=args.seed, progress=not args.quiet)
+    # through mrfpe.sample: BLAS on one thread, the result checked before it is written
+    post = mrfpe.sample(args.sampler, target, seed=seed, progress=not args.quiet, **settings)
     save(post, out)  # atomic: a kill mid-write never leaves a partial posterior
     m = post["map_theta"].isel(step=-1).values
     natural = np.asarray(target.to_natural(m), dtype=float).reshape(-1)
@@ -220,6 +235,8 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--target-option", action="append", default=[], metavar="KEY=VALUE",
                    help="target option (repeatable), e.g. --target-option dtype=float32")
     e.add_argument("--quiet", action="store_true", help="no progress bar")
+    e.add_argument("--force", action="store_true",
+                   help="overwrite --out even if it exists and is not a posterior file")
     e.set_defaults(func=_estimate)
 
     c = sub.add_parser("compare", help="distance between two posterior netCDF files")
@@ -253,6 +270,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--out", default=None,
                    help="output directory (default: studies/NAME/out, or out-quick with "
                         "--quick); rerun with the same one to resume")
+    r.add_argument("--force", action="store_true",
+                   help="run even if --out holds another study's files (they are replaced "
+                        "where names collide)")
     rp = st_sub.add_parser("report", help="write a study's report from the trial files on "
                                           "disk, running nothing (complete cells only)")
     rp.add_argument("name", help="study name (see 'mrfpe study list') or path to a .py file")
@@ -290,6 +310,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except Exception as exc:  # a bug or an environment failure, not bad input
         if args.debug:
             raise
+        if getattr(exc, "errno", None) in (errno.ENOSPC, errno.EDQUOT):  # a full disk: say so
+            print(f"mrfpe {args.command}: error: {exc}", file=sys.stderr)
+            return 1
         print(f"mrfpe {args.command}: internal error: {type(exc).__name__}: {exc} "
               "(rerun with --debug for the traceback)", file=sys.stderr)
         return 1

@@ -5,21 +5,69 @@ runner, :func:`mrfpe.posterior.load` and :meth:`mrfpe.scene.Scene.load` read
 through :func:`open_dataset`, so a truncated or corrupt file gives one line --
 ``run.nc: not a readable netCDF posterior file (NetCDF: HDF error)`` -- instead
 of a bare ``OSError: HDF error`` from deep inside the HDF5 library.
-:func:`write_atomic` never leaves a partial file under the final name.
+:func:`write_atomic` never leaves a partial file under the final name, stamps
+a content checksum into every file (:mod:`mrfpe.checksum`) that every reader
+verifies, and names a full disk as such (:class:`DiskFullError`).
 """
 
 from __future__ import annotations
 
+import errno
 import os
 import re
+import stat
 import uuid
 from pathlib import Path
 from typing import Any
 
 import xarray as xr
 
-__all__ = ["TMP_SUFFIX", "check_readable", "check_writable", "open_dataset", "read_attrs",
-           "tmp_path_for", "write_atomic"]
+from mrfpe.checksum import ATTR as CHECKSUM_ATTR
+from mrfpe.checksum import ChecksumError, stamp, verify
+
+__all__ = ["TMP_SUFFIX", "ChecksumError", "DiskFullError", "check_readable", "check_writable",
+           "disk_full", "open_dataset", "read_attrs", "tmp_path_for", "write_atomic",
+           "write_text_atomic"]
+
+
+class DiskFullError(OSError):
+    """A write failed because the file system is full (``errno.ENOSPC``), with the path named."""
+
+    def __init__(self, message: str):
+        super().__init__(errno.ENOSPC, message)
+
+    def __str__(self) -> str:
+        return str(self.strerror)
+
+
+def _free_bytes(directory: Path) -> int | None:
+    try:
+        st = os.statvfs(directory)
+    except OSError:  # pragma: no cover - e.g. platforms without statvfs
+        return None
+    return st.f_bavail * st.f_frsize
+
+
+def disk_full(exc: BaseException, path: str | os.PathLike, what: str,
+              needed: int = 0) -> DiskFullError | None:
+    """A :class:`DiskFullError` naming ``path`` if ``exc`` came from a full disk, else ``None``.
+
+    The HDF5 library reports a full disk as a bare "HDF error", without ``errno``:
+    then the free space of ``path``'s file system decides (less than ``needed``
+    bytes plus 1 MiB left means the write could not fit).
+    """
+    if isinstance(exc, DiskFullError):
+        return exc
+    p = Path(path)
+    free = _free_bytes(p.parent if str(p.parent) else Path("."))
+    full = getattr(exc, "errno", None) in (errno.ENOSPC, errno.EDQUOT) or (
+        isinstance(exc, OSError | RuntimeError) and free is not None
+        and free < needed + (1 << 20))
+    if not full:
+        return None
+    left = "" if free is None else f", {free} bytes free"
+    return DiskFullError(f"{p}: no space left on the device to write the {what} file{left}; "
+                         "free some space and run again")
 
 #: Temporary files are ``.<name>.<8 hex>.tmp`` beside their target (same file system,
 #: so ``os.replace`` is atomic); a run killed mid-write leaves only such a file behind.
@@ -32,13 +80,29 @@ _ERRNO = re.compile(r"^\[Errno -?\d+\]\s*")
 def _reason(exc: BaseException, path: Path) -> str:
     text = str(exc).strip() or type(exc).__name__
     text = _ERRNO.sub("", text)
-    for form in (f": '{path}'", f": {path!s}", f" '{path}'", str(path)):
-        text = text.replace(form, "")
+    # the libraries quote the path, relative or made absolute: drop whole quoted forms
+    # only (a bare replace of "s.nc" would leave "/abs/dir/" behind)
+    forms = {str(path), os.path.abspath(path), str(path.resolve())}
+    for form in sorted(forms, key=len, reverse=True):
+        for quoted in (f": '{form}'", f" '{form}'", f": {form}"):
+            if text.endswith(quoted):
+                text = text[: -len(quoted)]
     return text.strip(" :") or type(exc).__name__
 
 
 def _unreadable(path: Path, what: str, exc: BaseException) -> ValueError:
     return ValueError(f"{path}: not a readable netCDF {what} file ({_reason(exc, path)})")
+
+
+def _kind(p: Path) -> str:
+    """What ``p`` is, in words, when it is not a regular file."""
+    mode = p.stat().st_mode
+    for test, name in ((stat.S_ISDIR, "a directory"), (stat.S_ISCHR, "a character device"),
+                       (stat.S_ISBLK, "a block device"), (stat.S_ISFIFO, "a named pipe"),
+                       (stat.S_ISSOCK, "a socket")):
+        if test(mode):
+            return name
+    return "no regular file"  # pragma: no cover
 
 
 def check_readable(path: str | os.PathLike, what: str = "input") -> Path:
@@ -50,7 +114,7 @@ def check_readable(path: str | os.PathLike, what: str = "input") -> Path:
     if not p.exists():
         raise ValueError(f"{p}: no such {what} file")
     if not p.is_file():
-        raise ValueError(f"{p}: expected a netCDF {what} file, found a directory")
+        raise ValueError(f"{p}: expected a netCDF {what} file, found {_kind(p)}")
     if not os.access(p, os.R_OK):
         raise ValueError(f"{p}: {what} file is not readable (permission denied)")
     return p
@@ -66,6 +130,8 @@ def check_writable(path: str | os.PathLike, what: str = "output") -> Path:
     p = Path(path)
     if p.is_dir():
         raise ValueError(f"{p}: {what} path is a directory; expected a file name")
+    if p.exists() and not p.is_file():
+        raise ValueError(f"{p}: {what} path is {_kind(p)}; expected a file name")
     parent = p.parent if str(p.parent) else Path(".")
     if not parent.is_dir():
         raise ValueError(f"{p}: cannot write the {what} file: directory {parent} does not exist")
@@ -89,29 +155,42 @@ def open_dataset(path: str | os.PathLike, what: str = "data", **kwargs: Any) -> 
     """
     p = check_readable(path, what)
     kwargs.setdefault("engine", "netcdf4")
+    _verified_attrs(p, what)
     try:
         with xr.open_dataset(p, **kwargs) as f:
-            return f.load()
-    except (OSError, RuntimeError, KeyError, IndexError, ValueError) as exc:
+            ds = f.load()
+    except Exception as exc:
         # netCDF4 raises OSError (HDF errors) or RuntimeError (NetCDF: ...); xarray's
-        # decoders a ValueError/KeyError on garbage metadata. All mean: not this file.
+        # decoders anything from ValueError to AttributeError on garbage metadata.
+        # All mean: not this file.
+        raise _unreadable(p, what, exc) from exc
+    ds.attrs.pop(CHECKSUM_ATTR, None)
+    return ds
+
+
+def _verified_attrs(p: Path, what: str) -> dict[str, Any]:
+    """The global attributes of ``p`` after checking its content against its checksum."""
+    import netCDF4
+
+    try:
+        with netCDF4.Dataset(p) as nc:
+            verify(nc, str(p))
+            return {k: nc.getncattr(k) for k in nc.ncattrs() if k != CHECKSUM_ATTR}
+    except ChecksumError:
+        raise
+    except Exception as exc:
         raise _unreadable(p, what, exc) from exc
 
 
 def read_attrs(path: str | os.PathLike, what: str = "data") -> dict[str, Any]:
     """The global attributes of a netCDF file (netCDF4 directly: ~10× faster than xarray).
 
-    Raises ``ValueError`` as :func:`open_dataset` does. Only the header is read:
-    a file truncated in its data may pass; :func:`open_dataset` catches it.
+    Raises ``ValueError`` as :func:`open_dataset` does. The content is checked
+    against the file's checksum (:mod:`mrfpe.checksum`), so a damaged file is
+    refused here too; a file without one (written before checksums existed) is
+    checked in its header only.
     """
-    import netCDF4
-
-    p = check_readable(path, what)
-    try:
-        with netCDF4.Dataset(p) as nc:
-            return {k: nc.getncattr(k) for k in nc.ncattrs()}
-    except (OSError, RuntimeError, KeyError, ValueError) as exc:
-        raise _unreadable(p, what, exc) from exc
+    return _verified_attrs(check_readable(path, what), what)
 
 
 def tmp_path_for(path: str | os.PathLike) -> Path:
@@ -133,27 +212,70 @@ def _fsync_dir(directory: Path) -> None:
         os.close(fd)
 
 
-def write_atomic(ds: xr.Dataset, path: str | os.PathLike, **kwargs: Any) -> Path:
+def _fsync_file(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def write_atomic(ds: xr.Dataset, path: str | os.PathLike, what: str = "output",
+                 **kwargs: Any) -> Path:
     """Write ``ds`` to ``path`` so that ``path`` is either absent, old, or complete.
 
-    Writes a temporary file beside it, ``fsync``s it, then ``os.replace``s it
-    over ``path`` (and syncs the directory): a kill or power loss mid-write
-    leaves at most a ``*.tmp`` file, never a partial ``path``. ``kwargs`` go to
+    Writes a temporary file beside it, stamps its content checksum into it
+    (:func:`mrfpe.checksum.stamp`), ``fsync``s it, then ``os.replace``s it over
+    ``path`` (and syncs the directory): a kill or power loss mid-write leaves at
+    most a ``*.tmp`` file, never a partial ``path``. ``kwargs`` go to
     :meth:`xarray.Dataset.to_netcdf` (engine ``netcdf4`` unless given).
+
+    Raises
+    ------
+    DiskFullError
+        When the file system is full, naming ``path`` (``what`` says what it is),
+        instead of the HDF5 library's bare "HDF error"; nothing is left behind.
     """
     p = Path(path)
     kwargs.setdefault("engine", "netcdf4")
     tmp = tmp_path_for(p)
     try:
         ds.to_netcdf(tmp, **kwargs)
-        fd = os.open(tmp, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
+        stamp(tmp)
+        _fsync_file(tmp)
         os.replace(tmp, p)
         _fsync_dir(p.parent)
+    except Exception as exc:
+        full = disk_full(exc, p, what, needed=int(ds.nbytes))
+        if full is not None:
+            _discard(tmp)
+            raise full from exc
+        raise
     finally:
-        if tmp.exists():
-            tmp.unlink()
+        _discard(tmp)
+    return p
+
+
+def _discard(tmp: Path) -> None:
+    try:
+        tmp.unlink()
+    except FileNotFoundError:
+        pass
+
+
+def write_text_atomic(text: str, path: str | os.PathLike, what: str = "output") -> Path:
+    """Write ``text`` to ``path`` atomically (temporary file, ``os.replace``), as
+    :func:`write_atomic`; a full disk raises :class:`DiskFullError` naming ``path``."""
+    p = Path(path)
+    tmp = tmp_path_for(p)
+    try:
+        tmp.write_text(text)
+        os.replace(tmp, p)
+    except OSError as exc:
+        full = disk_full(exc, p, what, needed=len(text.encode()))
+        if full is not None:
+            raise full from exc
+        raise
+    finally:
+        _discard(tmp)
     return p

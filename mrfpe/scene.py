@@ -279,18 +279,29 @@ class Scene:
         )
 
     def save(self, path: str | Path) -> None:
-        """Write the scene to a netCDF4 file."""
+        """Write the scene to a netCDF4 file, atomically and with a content checksum
+        (:func:`mrfpe.netcdf.write_atomic`)."""
+        from mrfpe.netcdf import write_atomic
+
         ds = self.to_dataset()
         encoding = {v: {"_FillValue": None} for v in ds.data_vars}
-        ds.to_netcdf(path, engine="netcdf4", encoding=encoding)
+        write_atomic(ds, path, "scene", encoding=encoding)
 
     @classmethod
     def load(cls, path: str | Path) -> Scene:
-        """Read a scene written by :meth:`save` (a missing, truncated or corrupt file
-        raises ``ValueError`` naming it, :func:`mrfpe.netcdf.open_dataset`)."""
+        """Read a scene written by :meth:`save`.
+
+        A missing, truncated, corrupt or damaged file (:func:`mrfpe.netcdf.open_dataset`),
+        or a netCDF file that is not a scene, raises ``ValueError`` naming it.
+        """
         from mrfpe.netcdf import open_dataset
 
-        return cls.from_dataset(open_dataset(path, "scene"))
+        ds = open_dataset(path, "scene")
+        try:
+            return cls.from_dataset(ds)
+        except Exception as exc:  # whatever a damaged attribute makes the decoders raise
+            raise ValueError(f"{path}: not a scene file (written by Scene.save / mrfpe demo): "
+                             f"{type(exc).__name__}: {exc}") from None
 
     def __repr__(self) -> str:
         H, W = self.image.shape

@@ -233,6 +233,12 @@ def make_scene(brdf: str = "ward", theta: Any = None, shape: tuple[int, int] = (
     seed = check_seed(seed)
     # B >= 2: with one label the pseudolikelihood is identically 0 (no alternative label)
     B = _int_param(n_labels, "n_labels", 2)
+    from mrfpe.targets.budget import check_memory
+
+    # per node: the label ranges, the range prior and beliefs (B floats each) and a dozen
+    # per-pixel working arrays (normals, shading, the range map): checked before any
+    check_memory(8.0 * ((H + 1) * (W + 1) * (3 * B + 16) + 16 * H * W),
+                 f"a {H}x{W} scene with {B} labels", "use a smaller shape or fewer labels")
     step_px = _pos_float(label_step, "label_step")
     sigma_lab = B / 5.0 if prior_sigma is None else _pos_float(prior_sigma, "prior_sigma")
     noise = _pos_float(noise, "noise", allow_zero=True)

@@ -19,6 +19,7 @@ feature string, so cached code of the two settings never mixes. Opt out with
 from __future__ import annotations
 
 import os
+import threading
 from collections.abc import Iterator
 from contextlib import AbstractContextManager, contextmanager
 
@@ -88,15 +89,50 @@ def blas_threads(n: int | None = None) -> Iterator[None]:
     and 0.77-0.87 s with one. The previous limits are restored on exit
     (``threadpoolctl``; about 1.5 ms per entry). ``n=None`` with
     ``BLAS_THREADS = None`` changes nothing.
+
+    Only the main thread changes the limits: OpenBLAS lowers its thread count
+    when asked from any thread but raises it again only when asked from the main
+    one, so a limit set in a worker thread (``mrfpe.sample`` in a thread pool)
+    would stay for the whole process; there BLAS is left as it is. Nested blocks
+    share one limit, and the original limits come back when the outermost ends.
     """
     n = BLAS_THREADS if n is None else n
-    if n is None:
+    if n is None or threading.current_thread() is not threading.main_thread():
+        # OpenBLAS lowers its thread count from any thread but raises it again only from
+        # the main one: a limit set in a worker thread would stay for the process
         yield
         return
+    _blas_enter(int(n))
+    try:
+        yield
+    finally:
+        _blas_exit()
+
+
+# BLAS limits are process-wide while each caller's block is its own: the first block to
+# enter sets the limit and remembers the original, the last to leave restores it. (Each
+# block saving and restoring its own "previous" value, as threadpool_limits does, leaves
+# the limit at 1 for good when blocks in several threads overlap out of order.)
+_BLAS_LOCK = threading.Lock()
+_blas_state: dict[str, object] = {"users": 0, "limiter": None}
+
+
+def _blas_enter(n: int) -> None:
     from threadpoolctl import threadpool_limits
 
-    with threadpool_limits(limits=int(n), user_api="blas"):
-        yield
+    with _BLAS_LOCK:
+        if _blas_state["users"] == 0:
+            _blas_state["limiter"] = threadpool_limits(limits=n, user_api="blas")
+        _blas_state["users"] = int(_blas_state["users"]) + 1  # type: ignore[call-overload]
+
+
+def _blas_exit() -> None:
+    with _BLAS_LOCK:
+        _blas_state["users"] = int(_blas_state["users"]) - 1  # type: ignore[call-overload]
+        if _blas_state["users"] == 0:
+            limiter = _blas_state["limiter"]
+            _blas_state["limiter"] = None
+            limiter.restore_original_limits()  # type: ignore[union-attr]
 
 
 def _numba_compiled_anything() -> bool:

@@ -14,8 +14,9 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["check_bool", "check_bounds", "check_choice", "check_keywords", "check_n_jobs",
-           "check_positive_int", "check_range", "check_seed", "check_target", "keyword_names"]
+__all__ = ["MAX_SEED", "check_bool", "check_bounds", "check_choice", "check_keywords",
+           "check_n_jobs", "check_positive_int", "check_range", "check_seed", "check_target",
+           "keyword_names"]
 
 
 def check_positive_int(name: str, value: Any, minimum: int = 1) -> int:
@@ -66,11 +67,15 @@ def check_bool(name: str, value: Any) -> bool:
     return bool(value)
 
 
+#: Largest seed: posteriors and trial files store it as a signed 64-bit attribute.
+MAX_SEED = 2**63 - 1
+
+
 def check_seed(seed: Any, name: str = "seed") -> int | None:
-    """Return ``seed`` if it is a non-negative integer or None, else raise ValueError."""
+    """Return ``seed`` if it is an integer in [0, :data:`MAX_SEED`] or None, else ValueError."""
     if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int | np.integer)
-                             or seed < 0):
-        raise ValueError(f"{name} must be a non-negative integer or None; got {seed!r}")
+                             or not 0 <= seed <= MAX_SEED):
+        raise ValueError(f"{name} must be an integer in [0, 2**63 - 1] or None; got {seed!r}")
     return None if seed is None else int(seed)
 
 

@@ -15,7 +15,9 @@ grimp = pytest.importorskip("grimp")
 
 #: Modules every layer may use; they import no other mrfpe module. (``mrfpe.mixture``
 #: is not one: its numba kernel uses the vectorised exp/log of ``mrfpe.targets.kernels``.)
-LEAVES = ("mrfpe.validation", "mrfpe.resampling", "mrfpe.threads", "mrfpe.netcdf")
+LEAVES = ("mrfpe.validation", "mrfpe.resampling", "mrfpe.threads", "mrfpe.checksum")
+#: Modules that import leaves only (the netCDF reader verifies checksums).
+NEAR_LEAVES = ("mrfpe.netcdf",)
 
 
 @pytest.fixture(scope="module")
@@ -89,6 +91,11 @@ def test_cycle_finder_sees_a_cycle():
 @pytest.mark.parametrize("leaf", LEAVES)
 def test_leaf_modules_import_no_mrfpe_module(graph, leaf):
     assert {m for m in _edges(graph, leaf) if m.startswith("mrfpe")} == set()
+
+
+@pytest.mark.parametrize("module", NEAR_LEAVES)
+def test_near_leaves_import_leaves_only(graph, module):
+    assert {m for m in _edges(graph, module) if m.startswith("mrfpe")} <= set(LEAVES)
 
 
 def test_library_never_imports_the_cli(graph):

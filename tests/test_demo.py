@@ -55,3 +55,12 @@ def test_demo_rejects_bad_seed(tmp_path):
 
     with pytest.raises(ValueError, match="seed"):
         main(tmp_path, quick=True, seed=-1)
+
+
+def test_demo_over_the_memory_budget_writes_nothing(tmp_path, monkeypatch, capsys):
+    from mrfpe import cli
+
+    monkeypatch.setenv("MRFPE_MEMORY_BUDGET", "1KB")
+    assert cli.main(["demo", "--quick", "--out", str(tmp_path / "d")]) == 2
+    assert "memory budget" in capsys.readouterr().err
+    assert list((tmp_path / "d").iterdir()) == []

@@ -33,6 +33,7 @@ def posteriors(draw):
     if not np.isfinite(lw).any():
         lw[rng.integers(S)] = pool[0]
     lt = np.where(rng.random(S) < 0.2, -np.inf, rng.normal(size=S))
+    lt[rng.integers(S)] = 0.0  # a target -inf everywhere is refused (no support)
     kw = {}
     if draw(st.booleans()):
         kw["chain"] = np.tile(np.arange(n_chains), S // n_chains)

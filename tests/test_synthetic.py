@@ -222,3 +222,11 @@ def test_bad_arguments_are_named(kw, word):
     args = {"brdf": "ward", "theta": [0.5, 0.5, 0.1], "shape": (2, 2), "n_labels": 3, **kw}
     with pytest.raises(ValueError, match=word):
         synthetic.make_scene(**args)
+
+
+def test_a_scene_beyond_the_memory_budget_fails_before_allocating():
+    from mrfpe.synthetic import make_scene
+
+    with pytest.raises(ValueError, match=r"a 100000x100000 scene with 20 labels needs about .* "
+                                         "more than the memory budget"):
+        make_scene(brdf="ward", theta=[0.3, 0.2, 0.1], shape=(100000, 100000))

@@ -71,3 +71,54 @@ def test_compiled_features_follow_numba_settings(monkeypatch):
     assert compiled_features() == frozenset()
     monkeypatch.setenv("NUMBA_CPU_NAME", "host")
     assert compiled_features() == host
+
+
+def test_blas_threads_restored_after_overlapping_blocks_in_threads():
+    """Four threads entering and leaving in an interleaved order: the original BLAS
+    thread count comes back (each block restoring its own 'previous' value left 1)."""
+    import threading
+
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    from mrfpe.threads import blas_threads
+
+    def blas():
+        return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+
+    with threadpool_limits(limits=2, user_api="blas"):
+        original = blas()
+        entered = [threading.Event() for _ in range(4)]
+        leave = [threading.Event() for _ in range(4)]
+
+        def worker(i):
+            with blas_threads(1):
+                entered[i].set()
+                leave[i].wait(10)
+
+        threads = []
+        for i in range(4):  # enter one after the other ...
+            threads.append(threading.Thread(target=worker, args=(i,)))
+            threads[-1].start()
+            entered[i].wait(10)
+        for i in (0, 2, 1, 3):  # ... leave out of order
+            leave[i].set()
+            threads[i].join(10)
+        assert blas() == original
+
+
+def test_sample_in_four_threads_leaves_blas_as_it_was():
+    from concurrent.futures import ThreadPoolExecutor
+
+    from threadpoolctl import threadpool_info
+
+    import mrfpe
+    from mrfpe.testing.targets import CorrelatedGaussian
+
+    def blas():
+        return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+
+    before = blas()
+    with ThreadPoolExecutor(4) as ex:
+        list(ex.map(lambda s: mrfpe.sample("pmc", CorrelatedGaussian(), seed=s, n_samples=200,
+                                           n_iterations=3), range(8)))
+    assert blas() == before

@@ -35,7 +35,8 @@ Input validation (:func:`as_sample_sets`) at the public boundary:
   different order are aligned to the first posterior's order (xarray-style);
   different names raise ``ValueError``;
 * ``theta`` must be finite (NaN or infinite samples raise ``ValueError``;
-  drop them before comparing);
+  drop them before comparing), at most :data:`THETA_LIMIT` in magnitude, and
+  have at least one parameter;
 * NaN log weights count as ``-inf`` (as in :func:`mrfpe.posterior.normalise_log_weights`);
   a set whose every log weight is ``-inf``/NaN has zero total weight and
   raises ``ValueError`` (there is no distribution to compare);
@@ -60,7 +61,11 @@ from mrfpe._caller import stacklevel_outside_mrfpe
 from mrfpe.resampling import check_log_weights, normalise_log_weights
 from mrfpe.validation import check_bool, check_n_jobs
 
-__all__ = ["Distance", "SampleSet", "Similarity", "as_sample_sets", "check_bool"]
+__all__ = ["THETA_LIMIT", "Distance", "SampleSet", "Similarity", "as_sample_sets", "check_bool"]
+
+#: Largest |theta| a distance accepts: squared differences, covariances and their
+#: determinants stay finite in float64 well beyond it (1e100² = 1e200).
+THETA_LIMIT = 1e100
 
 
 @dataclass(frozen=True)
@@ -123,6 +128,9 @@ def _sample_set(post: Any, name: str, min_samples: int,
         names = order
     theta = np.asarray(post["theta"].values, dtype=np.float64)
     S = theta.shape[0]
+    if theta.shape[1] == 0:
+        raise ValueError(f"{name} has no parameters (param has length 0); there is nothing "
+                         "to compare")
     if S < max(1, min_samples):
         raise ValueError(f"{name} has {S} sample(s); this distance needs at least "
                          f"{max(1, min_samples)}")
@@ -131,6 +139,11 @@ def _sample_set(post: Any, name: str, min_samples: int,
         rows = np.flatnonzero(bad)
         raise ValueError(f"{name}.theta has {rows.size} non-finite (NaN/inf) sample(s), "
                          f"e.g. rows {rows[:5].tolist()}; drop them before comparing")
+    big = float(np.abs(theta).max()) if theta.size else 0.0
+    if big > THETA_LIMIT:
+        raise ValueError(f"{name}.theta has values up to {big:.3g} in magnitude; distances need "
+                         f"|theta| <= {THETA_LIMIT:.0e} (their squares and covariances would "
+                         "overflow): rescale the parameters")
     lw = check_log_weights(post["log_weight"].values, f"{name}.log_weight")
     return SampleSet(theta, normalise_log_weights(lw), names, post)
 
@@ -227,9 +240,22 @@ class Distance:
         return feats, p
 
     def __call__(self, a: Any, b: Any, **params: Any) -> float:
-        """Distance form between posteriors ``a`` and ``b`` (lower = more alike)."""
+        """Distance form between posteriors ``a`` and ``b`` (lower = more alike).
+
+        Raises ``ValueError`` for bad inputs (module docstring), and when the
+        computation breaks down (a singular matrix, a NaN result) rather than
+        return a number that means nothing.
+        """
         (fa, fb), p = self.prepare([a, b], ("a", "b"), **params)
-        return float(self.compare(fa, fb, p))
+        try:
+            value = float(self.compare(fa, fb, p))
+        except np.linalg.LinAlgError as exc:
+            raise ValueError(f"{self._label()}: the linear algebra failed on these "
+                             f"posteriors ({exc}); are their samples degenerate?") from None
+        if np.isnan(value):
+            raise ValueError(f"{self._label()}: the distance is NaN for these posteriors "
+                             "(an overflow or a degenerate covariance)")
+        return value
 
     def pairwise(self, posteriors: Sequence[Any], *, n_jobs: int = 1, progress: bool = False,
                  **params: Any) -> np.ndarray:

@@ -32,6 +32,7 @@ import numpy as np
 from scipy.spatial.distance import cdist
 
 from mrfpe.distances.base import Distance, SampleSet
+from mrfpe.targets.budget import check_memory
 from mrfpe.validation import check_positive_int, check_range
 
 __all__ = ["EMD", "SlicedWasserstein"]
@@ -90,6 +91,9 @@ class SlicedWasserstein(Distance):
         return u / np.linalg.norm(u, axis=0, keepdims=True)
 
     def features(self, s: SampleSet, p: dict[str, Any]) -> tuple[np.ndarray, ...]:
+        check_memory(8.0 * 2 * s.theta.shape[1] * p["n_projections"],
+                     f"sliced_wasserstein's {p['n_projections']} projections",
+                     "lower n_projections")
         # the directions depend only on (d, seed): every posterior, hence every
         # pair of a matrix, uses the same draw, so d(a, b) == d(b, a)
         return (*_masses(s), self.projections(s.theta.shape[1], p))
@@ -98,5 +102,9 @@ class SlicedWasserstein(Distance):
         import ot
 
         (xa, wa, proj), (xb, wb, _) = fa, fb
+        # POT projects both sets on every direction at once, then sorts: (S_a + S_b) x n
+        check_memory(8.0 * 3 * (xa.shape[0] + xb.shape[0]) * p["n_projections"],
+                     f"sliced_wasserstein with n_projections={p['n_projections']} on "
+                     f"{xa.shape[0]} and {xb.shape[0]} samples", "lower n_projections")
         return max(float(ot.sliced_wasserstein_distance(xa, xb, wa, wb, p=p["p"],
                                                          projections=proj)), 0.0)

@@ -77,19 +77,27 @@ def save(post: xr.Dataset, path: Any) -> None:
         var.encoding = {}
         if var.dtype.kind == "f":
             var.encoding["_FillValue"] = None  # NaN is data, not "missing"
-    write_atomic(ds, path, format="NETCDF4")
+    write_atomic(ds, path, "posterior", format="NETCDF4")
 
 
 def load(path: Any) -> xr.Dataset:
     """Read a posterior written by :func:`save` (fully into memory; the file is closed).
 
-    A missing, truncated or corrupt file raises ``ValueError`` naming it
-    (:func:`mrfpe.netcdf.open_dataset`).
+    A missing, truncated, corrupt or damaged file (:func:`mrfpe.netcdf.open_dataset`),
+    or attributes that do not decode, raise ``ValueError`` naming it.
     """
     from mrfpe.netcdf import open_dataset
 
     ds = open_dataset(path, "posterior", mask_and_scale=False, decode_times=False,
                       decode_timedelta=False)
+    try:
+        return _decode(ds)
+    except Exception as exc:  # a damaged JSON attribute, a non-string list, ...
+        raise ValueError(f"{path}: not a posterior file (written by mrfpe estimate / "
+                         f"posterior.save): {type(exc).__name__}: {exc}") from None
+
+
+def _decode(ds: xr.Dataset) -> xr.Dataset:
     ds.attrs = _decode_attrs(ds.attrs)
     for name, var in ds.variables.items():
         var.attrs = _decode_attrs(var.attrs)

@@ -57,6 +57,17 @@ def _chain(chain: Any, S: int) -> np.ndarray:
     return c.astype(np.int64)
 
 
+def _check_log_target(lt: np.ndarray, name: str) -> None:
+    """Refuse ``+inf`` and a log target that is ``-inf``/NaN at every sample (no support:
+    the samples would say nothing about the target)."""
+    if np.isposinf(lt).any():
+        raise ValueError(f"{name} is +inf at {int(np.isposinf(lt).sum())} sample(s); a log "
+                         "density must be finite or -inf")
+    if lt.size and not np.isfinite(lt).any():
+        raise ValueError(f"{name} is -inf or NaN at every one of its {lt.size} samples: the "
+                         "target has no support where the sampler looked")
+
+
 def _optional_float(name: str, value: Any) -> float | None:
     if value is None:
         return None
@@ -122,7 +133,8 @@ def build(
     Raises
     ------
     ValueError
-        Naming the argument: shapes that do not match, non-finite ``theta``,
+        Naming the argument: shapes that do not match, non-finite ``theta``, a
+        ``log_target`` that is ``+inf`` anywhere or ``-inf``/NaN everywhere,
         degenerate ``log_weight`` (all ``-inf``/NaN, or ``+inf``), a bad ``chain``
         or ``kind``.
 
@@ -146,6 +158,7 @@ def build(
     lt = _float_array("log_target", log_target).reshape(-1)
     if lt.shape[0] != theta.shape[0]:
         raise ValueError(f"log_target has {lt.shape[0]} values for {theta.shape[0]} samples")
+    _check_log_target(lt, f"log_target of the posterior of {sampler}")
     if kind not in KINDS:
         raise ValueError(f"kind must be one of {', '.join(KINDS)}; got {kind!r}")
     if log_weight is None:
@@ -263,8 +276,9 @@ def validate(post: Any) -> None:
     ValueError
         Naming the first problem found: missing or mis-dimensioned variable,
         non-float data, non-finite samples, log weights that are not normalised
-        or all ``-inf``, an ESS outside [0, S], a ``param`` coordinate that does
-        not match, a bad ``chain``, or a missing / mistyped / non-JSON attribute
+        or all ``-inf``, a log target that is ``+inf`` somewhere or ``-inf``
+        everywhere, an ESS outside [0, S], a ``param`` coordinate that does not
+        match, a bad ``chain``, or a missing / mistyped / non-JSON attribute
         (``kind``, ``diag_*`` and ``log_evidence*`` are checked when present).
     """
     if not isinstance(post, xr.Dataset):
@@ -295,6 +309,7 @@ def validate(post: Any) -> None:
         raise ValueError(f"log_weight must be normalised (logsumexp = 0); got {total:.3g}")
     if np.isnan(post["log_target"].values).any():
         raise ValueError("log_target contains NaN (use -inf for impossible samples)")
+    _check_log_target(post["log_target"].values, "log_target")
     e = post["ess"].values
     if np.any((e < 0) | (e > S * (1 + 1e-9)) & ~np.isnan(e)):
         raise ValueError(f"ess must lie in [0, {S}] or be NaN; got {e}")

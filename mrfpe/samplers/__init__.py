@@ -14,8 +14,10 @@ implement the interface or reuses a name is reported by :func:`broken` and in
 from __future__ import annotations
 
 from mrfpe.samplers.registry import registry, validate_sampler
+from mrfpe.samplers.result import check_result
 
-__all__ = ["available", "broken", "get", "registry", "table", "validate_sampler"]
+__all__ = ["available", "broken", "check_result", "get", "registry", "table",
+           "validate_sampler"]
 
 
 available = registry.names  # names of the working samplers, sorted

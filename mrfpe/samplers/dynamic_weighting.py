@@ -186,7 +186,8 @@ class _DynamicWeighting(Sampler):
         n, c, d = self.n_steps, self.n_chains, bounds.shape[0]
         lo, hi = bounds[:, 0], bounds[:, 1]
         sd = self.proposal_sd * (hi - lo)
-        run = Run(target, n, progress=progress, callback=callback, desc=self.name)
+        run = Run(target, n, progress=progress, callback=callback, desc=self.name,
+                  rows=n + c * (n // self.thin + self.burn_in + 4))
 
         x, lp = draw_in_support(run, target, rng, c, bounds)
         log_pi = self._initial_log_weight(lp)

@@ -77,7 +77,8 @@ class EmceeEnsemble(Sampler):
                              f"{d}-parameter target; got {w}")
         ss_start, ss_emcee = np.random.SeedSequence(seed).spawn(2)
         rng = np.random.default_rng(ss_start)
-        run = Run(target, n, progress=progress, callback=callback, desc=self.name)
+        run = Run(target, n, progress=progress, callback=callback, desc=self.name,
+                  rows=n + w * (n // self.thin + 4))
         p0, lp0 = draw_in_support(run, target, rng, w, bounds)
 
         sampler = emcee.EnsembleSampler(w, d, lambda x: run.evaluate(target, x), vectorize=True,

@@ -102,7 +102,9 @@ class _MultiSeed(Sampler):
         self._prepare(target, bounds)
         rng = np.random.default_rng(seed)
         starts = seed_points(bounds, self.n_seeds, self.seed_grid, rng)
-        run = Run(target, starts.shape[0], progress=progress, callback=callback, desc=self.name)
+        # the first step is one optimum: a small support may need several seeds to find
+        run = Run(target, starts.shape[0], progress=progress, callback=callback, desc=self.name,
+                  check_first_step=False)
         opt = np.empty_like(starts)
         lt = np.empty(starts.shape[0])
         info: dict[str, list[float]] = {}

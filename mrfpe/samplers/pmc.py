@@ -411,7 +411,8 @@ class PMC(Sampler):
         check_seed(seed)
         G = self._importance_functions(target)
         T = self.n_iterations
-        run = Run(target, T, progress=progress, callback=callback, desc=f"pmc/{self.variant}")
+        run = Run(target, T, progress=progress, callback=callback, desc=f"pmc/{self.variant}",
+                  rows=self.n_samples * (T + 4 if self.keep_history else 8))
         ctx = Context(run, np.random.default_rng(seed), bounds)
         step, history = STEPS[self.variant], History(self.keep_history)
         start = (space_filling(bounds, self.n_samples, ctx.rng) if self.initial == "halton"

@@ -127,7 +127,8 @@ class PPF(Sampler):
             G, cfg, step = [softened(p, self.power) for p in parts], self, thesis2_literal_step
         else:  # the jitter accounted for: PMC's deterministic-mixture step (thesis 5.6)
             G, cfg, step = parts, self._mixture_config(), mixture_step
-        run = Run(target, P, progress=progress, callback=callback, desc="ppf")
+        run = Run(target, P, progress=progress, callback=callback, desc="ppf",
+                  rows=self.n_samples * (P + 4 if self.keep_history else 8))
         ctx = Context(run, np.random.default_rng(seed), bounds)
         start = grid(bounds, self.n_samples, faces=self.initial == "grid_faces")
         state = init_state(start, self.power)  # p(X^0): uniform

@@ -113,7 +113,8 @@ class SIR(Sampler):
         check_seed(seed)
         rng = np.random.default_rng(seed)
         run = Run(target, self.n_iterations, progress=progress, callback=callback,
-                  desc=f"sir/{self.variant}")
+                  desc=f"sir/{self.variant}",
+                  rows=self.n_samples * (self.n_iterations + 4 if self.keep_history else 8))
         x = grid(bounds, self.n_samples, faces=self.initial == "grid_faces")  # p(X^0)
         step = self._classic_step if self.variant == "classic" else self._alternative_step(
             target, run, x)

@@ -194,6 +194,8 @@ def check_target_options(config: Mapping[str, Any]) -> None:
                              f"object; got {options!r}")
         try:
             mrfpe.targets.get(name, scene, **options)
+        except mrfpe.targets.MemoryBudgetError:
+            continue  # about this probe scene, not the options: each trial checks its own
         except (TypeError, ValueError) as exc:
             raise ValueError(f"setting 'target_options': {exc}") from None
 

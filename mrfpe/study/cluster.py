@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Any
 
 import xarray as xr
 
+from mrfpe.netcdf import DiskFullError
 from mrfpe.study.seeds import Task
 from mrfpe.study.trial import execute
 
@@ -33,14 +34,38 @@ def connect(address: str, timeout: float = CONNECT_TIMEOUT_S) -> Any:
             from None
     if not isinstance(address, str) or not address.strip():
         raise ValueError(f"--scheduler expects an address like tcp://HOST:8786; got {address!r}")
+    import copy
+
+    import dask
+
+    before = copy.deepcopy(dask.config.config)
+    clients = _registered_clients()
+    known = set(clients)
     try:
         return Client(address, timeout=timeout)
-    except (OSError, TimeoutError, ValueError) as exc:
+    except Exception as exc:  # also what a server that is not dask makes the client raise
+        # (a MemoryError for a garbage frame length, a protocol error, ...). A client that
+        # failed to start has already made itself dask's default scheduler: undo that, or
+        # every later dask computation in the process asks for a client that is not there.
+        dask.config.config.clear()
+        dask.config.config.update(before)
+        for key in set(clients) - known:  # nor may it stay registered as the default client
+            clients.pop(key, None)
         reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         if len(reason) > 160:
             reason = reason[:157] + "..."
         raise ValueError(f"--scheduler {address}: no dask scheduler reachable within "
-                         f"{timeout:g} s ({reason})") from None
+                         f"{timeout:g} s ({type(exc).__name__}: {reason})") from None
+
+
+def _registered_clients() -> dict:
+    """distributed's registry of live clients (what dask falls back to as the default
+    scheduler); an empty dict where this version keeps none."""
+    try:
+        from distributed.client import _global_clients
+    except ImportError:  # pragma: no cover - other distributed layouts
+        return {}
+    return _global_clients
 
 
 def execute_pickled(blob: bytes, study_name: str, config: dict, repeat: int, seed: int,
@@ -109,6 +134,8 @@ def run_on_cluster(study: Study, pending: list[Task], client: Any,
             task = futures.pop(fut)
             try:
                 finish(task, fut.result())
+            except DiskFullError:
+                raise  # stop: no further result could be written either
             except Exception:
                 fail(task, traceback.format_exc())
             fut.release()

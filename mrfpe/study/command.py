@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from mrfpe._terminal import WIDTH, plain, shorten, table
+from mrfpe.netcdf import DiskFullError
 from mrfpe.study.config import canonical
 from mrfpe.study.discovery import available, get
 from mrfpe.study.runner import run
@@ -102,12 +103,17 @@ def cli(args: Any) -> int:
     print(f"study {study.name} ({study.source}); full run: {_run_time(study.full_run)}")
     try:
         report = run(study, config, out, scheduler=args.scheduler, progress=True,
-                     log=lambda msg: print(msg, file=sys.stderr))
+                     log=lambda msg: print(msg, file=sys.stderr), force=args.force)
     except KeyboardInterrupt:
         done = len(list((out / "trials").glob("*.nc")))
         print(f"interrupted: {done} trial file(s) in {out / 'trials'}; "
               "rerun the same command to resume", file=sys.stderr)
         return 130
+    except DiskFullError as exc:
+        done = len(list((out / "trials").glob("*.nc")))
+        print(f"mrfpe study: error: {exc}; stopped with {done} trial file(s) in "
+              f"{out / 'trials'}; rerun the same command to resume", file=sys.stderr)
+        return 1
     print(report.text())
     if report.ok:
         print(f"report: {out / 'report.md'}")

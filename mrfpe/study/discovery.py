@@ -26,8 +26,20 @@ def _study_of(module: ModuleType, where: str) -> Study:
     return study
 
 
+class StudyFileError(ValueError):
+    """A study file that does not import; :attr:`reason` is what went wrong in it."""
+
+    def __init__(self, path: Path, reason: str):
+        super().__init__(f"{path}: cannot load the study file: {reason}")
+        self.reason = reason
+
+
 def load_file(path: str | os.PathLike) -> Study:
-    """Load a study from a Python file that defines ``STUDY``."""
+    """Load a study from a Python file that defines ``STUDY``.
+
+    A file that does not import (a ``SyntaxError``, an exception, a ``sys.exit``)
+    raises ``ValueError`` naming it and the reason.
+    """
     path = Path(path).resolve()
     if not path.is_file():
         raise FileNotFoundError(f"no study file {path}")
@@ -37,9 +49,9 @@ def load_file(path: str | os.PathLike) -> Study:
     sys.modules[mod_name] = module  # so pickling and dataclasses can find it
     try:
         spec.loader.exec_module(module)
-    except Exception:
+    except (Exception, SystemExit) as exc:  # a SyntaxError or a sys.exit in the file: name it
         sys.modules.pop(mod_name, None)
-        raise
+        raise StudyFileError(path, f"{type(exc).__name__}: {exc}") from None
     return _study_of(module, str(path))
 
 
@@ -66,9 +78,9 @@ def available(broken: dict[str, str] | None = None) -> dict[str, Study]:
     def add(name: str, load: Callable[[], Study]) -> None:
         try:
             found[name] = load()
-        except Exception as exc:  # one broken study must not hide the others
+        except (Exception, SystemExit) as exc:  # one broken study must not hide the others
             if broken is not None:
-                broken[name] = f"{type(exc).__name__}: {exc}"
+                broken[name] = getattr(exc, "reason", f"{type(exc).__name__}: {exc}")
 
     for name in _builtin_names():
         mod = f"mrfpe.studies.{name}"

@@ -26,7 +26,14 @@ from typing import Any
 
 import xarray as xr
 
-from mrfpe.netcdf import TMP_SUFFIX, open_dataset, read_attrs, tmp_path_for
+from mrfpe.netcdf import (
+    TMP_SUFFIX,
+    DiskFullError,
+    open_dataset,
+    read_attrs,
+    tmp_path_for,
+    write_text_atomic,
+)
 from mrfpe.study.config import canonical
 from mrfpe.study.seeds import Task, tasks
 from mrfpe.study.spec import Study
@@ -57,6 +64,8 @@ class RunReport:
     wall_time_s: float = 0.0
     table: str = ""
     notes: list[str] = field(default_factory=list)
+    #: trials whose traceback file was written (a full disk may have prevented it)
+    error_files: set[str] = field(default_factory=set)
 
     @property
     def ok(self) -> bool:
@@ -70,7 +79,9 @@ class RunReport:
         trials_dir = self.out_dir / "trials"
         for stem, err in self.failures[:10]:
             last = (err.strip().splitlines() or ["(no message)"])[-1]
-            lines.append(f"FAILED {stem}: {last} (traceback: {error_path(trials_dir, stem)})")
+            where = (f"traceback: {error_path(trials_dir, stem)}" if stem in self.error_files
+                     else "traceback not saved")
+            lines.append(f"FAILED {stem}: {last} ({where})")
         if len(self.failures) > 10:
             lines.append(f"... and {len(self.failures) - 10} more failures "
                          f"(tracebacks: {trials_dir}/*.error.txt)")
@@ -163,19 +174,37 @@ def _check_existing(study: Study, todo: list[Task], trials_dir: Path, mismatch: 
     return pending, done
 
 
+def _check_owner(study: Study, out: Path, force: bool) -> None:
+    """Refuse (without ``force``) an ``out`` whose ``config.json`` belongs to another study."""
+    manifest = out / "config.json"
+    if force or not manifest.is_file():
+        return
+    try:
+        other = json.loads(manifest.read_text()).get("study")
+    except (OSError, ValueError, AttributeError):
+        other = None
+    if other is None:
+        raise ValueError(f"--out {out} holds a config.json that is not a study manifest; "
+                         "choose another --out, or pass --force to write there anyway")
+    if other != study.name:
+        raise ValueError(f"--out {out} holds study {other!r}; running {study.name!r} there "
+                         "would replace its config.json and report.md and mix the trial "
+                         "files: choose another --out, or pass --force")
+
+
 def _write_manifest(study: Study, config: Mapping[str, Any], out: Path, n_tasks: int,
                     provenance: Mapping[str, str]) -> None:
     manifest = {"study": study.name, "version": study.version, "source": study.source,
                 "config": dict(config), "n_tasks": n_tasks,
                 "started_utc": datetime.now(UTC).isoformat(timespec="seconds"), **provenance}
-    tmp = tmp_path_for(out / "config.json")
-    tmp.write_text(json.dumps(manifest, indent=2, sort_keys=True) + "\n")
-    os.replace(tmp, out / "config.json")
+    write_text_atomic(json.dumps(manifest, indent=2, sort_keys=True) + "\n",
+                      out / "config.json", "study manifest")
 
 
 def run(study: Study, config: Mapping[str, Any], out_dir: str | os.PathLike, *,
         scheduler: str | None = None, progress: bool = True, mismatch: str = "error",
-        summarise: bool = True, log: Callable[[str], None] | None = None) -> RunReport:
+        summarise: bool = True, log: Callable[[str], None] | None = None,
+        force: bool = False) -> RunReport:
     """Run (or resume) every trial of ``study`` under ``config``, then summarise.
 
     Parameters
@@ -195,19 +224,28 @@ def run(study: Study, config: Mapping[str, Any], out_dir: str | os.PathLike, *,
     log
         Called with one-line notes as they arise (stray files removed, unreadable
         trial files recomputed); they are also in :attr:`RunReport.notes`.
+    force
+        Run even if ``out_dir`` holds another study (its ``config.json`` names it);
+        trial files of the same name but another configuration are recomputed.
 
     Raises
     ------
     ValueError
-        Before any trial runs: ``out_dir`` not writable or in use by another
-        run, scheduler unreachable, trial files of another configuration.
+        Before any trial runs: ``out_dir`` not writable, in use by another run or
+        holding another study (without ``force``), scheduler unreachable, trial
+        files of another configuration.
+    DiskFullError
+        When a file cannot be written for lack of space: the run stops there (the
+        trials written so far are kept; rerun to resume).
     """
     if mismatch not in ("error", "recompute"):
         raise ValueError(f"mismatch must be 'error' or 'recompute'; got {mismatch!r}")
+    if force:  # overwriting is what was asked for: trial files of the same name are replaced
+        mismatch = "recompute"
     t0 = time.perf_counter()
     out = Path(out_dir)
+    todo = tasks(study, config)  # first: a trial count beyond the budget creates nothing
     trials_dir = _prepare(out)
-    todo = tasks(study, config)
     report = RunReport(study.name, out, len(todo))
 
     def note(msg: str) -> None:
@@ -217,6 +255,7 @@ def run(study: Study, config: Mapping[str, Any], out_dir: str | os.PathLike, *,
 
     with contextlib.ExitStack() as stack:
         stack.enter_context(_locked(out))
+        _check_owner(study, out, force)
         client = None
         if scheduler is not None:
             from mrfpe.study.cluster import connect
@@ -275,8 +314,13 @@ def _run_pending(study: Study, config: Mapping[str, Any], pending: list[Task], t
         report.failures.append((task.stem, tb))
         header = (f"study {study.name!r}, trial {task.stem} (seed {task.seed}) failed.\n"
                   f"trial config: {canonical(task.config)}")
-        with contextlib.suppress(OSError):  # the failure itself is still reported
+        try:
             write_error(error_path(trials_dir, task.stem), header, tb)
+            report.error_files.add(task.stem)
+        except DiskFullError:
+            raise
+        except OSError:  # the failure itself is still reported
+            pass
 
     from tqdm.auto import tqdm
 
@@ -293,6 +337,8 @@ def _run_pending(study: Study, config: Mapping[str, Any], pending: list[Task], t
                 try:
                     finish(task, execute(study.trial, study.name, task.config, task.repeat,
                                          task.seed))
+                except DiskFullError:
+                    raise  # every further trial would be lost too: stop here
                 except Exception:
                     fail(task, traceback.format_exc())
                 tick()

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from mrfpe.study.config import canonical, config_hash
+from mrfpe.targets.budget import check_memory
 
 if TYPE_CHECKING:
     from mrfpe.study.spec import Study
@@ -57,6 +58,11 @@ def _stem(cell: Mapping[str, Any], repeat: int) -> str:
     return "".join(f"{k}={clean(v)}," for k, v in cell.items()) + f"repeat={repeat:04d}"
 
 
+#: Memory one trial's bookkeeping takes before it runs (its config, hash and names): a
+#: trial count beyond the memory budget is refused before the list is built.
+TASK_BYTES = 4096
+
+
 def tasks(study: Study, config: Mapping[str, Any]) -> list[Task]:
     """Every trial of ``config`` (resolved), repetition-major, cells in grid order.
 
@@ -66,6 +72,9 @@ def tasks(study: Study, config: Mapping[str, Any]) -> list[Task]:
     skip = {*study.grid, "n_trials", *study.summary_keys}
     base = {k: v for k, v in config.items() if k not in skip}
     cells = [dict(zip(study.grid, vals)) for vals in product(*(config[k] for k in study.grid))]
+    n = len(cells) * int(config["n_trials"])
+    check_memory(TASK_BYTES * n, f"study {study.name!r} with {n} trials ({config['n_trials']} "
+                 f"repetitions of {len(cells)} cells)", "lower --trials")
     out = []
     for repeat in range(config["n_trials"]):
         for cell in cells:

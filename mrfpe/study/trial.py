@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from mrfpe.netcdf import tmp_path_for, write_atomic
+from mrfpe.netcdf import write_atomic, write_text_atomic
 from mrfpe.study.spec import TrialFn
 
 __all__ = ["error_path", "execute", "result_path", "versions", "write_error", "write_result"]
@@ -87,7 +87,7 @@ def write_result(ds: xr.Dataset, path: Path, attrs: Mapping[str, Any]) -> None:
     ds.attrs = {k: _netcdf_attr(v) for k, v in {**ds.attrs, **attrs}.items()}
     for var in ds.variables.values():
         var.attrs = {k: _netcdf_attr(v) for k, v in var.attrs.items()}
-    write_atomic(ds, path)
+    write_atomic(ds, path, "trial")
     error = path.with_name(path.name[:-len(".nc")] + ".error.txt")
     if error.exists():  # an earlier failure of this trial is history now
         error.unlink()
@@ -95,6 +95,4 @@ def write_result(ds: xr.Dataset, path: Path, attrs: Mapping[str, Any]) -> None:
 
 def write_error(path: Path, header: str, tb: str) -> None:
     """Save a failed trial's traceback (atomically, like the results)."""
-    tmp = tmp_path_for(path)
-    tmp.write_text(f"{header}\n\n{tb}")
-    os.replace(tmp, path)
+    write_text_atomic(f"{header}\n\n{tb}", path, "trial traceback")

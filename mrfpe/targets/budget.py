@@ -12,7 +12,8 @@ The budget, in bytes, is, first found:
 
 1. :func:`set_memory_budget` (``None`` resets);
 2. the environment variable ``MRFPE_MEMORY_BUDGET`` -- bytes, or a number with a
-   unit ``"512MB"``, ``"2GB"``, ``"1.5GiB"``, or a fraction of RAM ``"0.25"``;
+   unit ``"512MB"``, ``"2GB"``, ``"1.5GiB"``, or a fraction of RAM written with a
+   decimal point, ``"0.25"`` or ``"1.0"`` (a bare ``"1"`` is one byte, not all RAM);
 3. half of the machine's physical RAM (:data:`DEFAULT_FRACTION`).
 """
 
@@ -57,24 +58,28 @@ def _physical_ram() -> int:
 
 
 def parse_bytes(value: Any, name: str = "memory budget") -> int:
-    """Bytes from an int, ``"2GB"``-style string or a RAM fraction in (0, 1] (``"0.25"``)."""
+    """Bytes from an int, ``"2GB"``-style string or a RAM fraction in (0, 1] written with a
+    decimal point (``"0.25"``, ``0.25``); an integer without a unit is a byte count."""
     if isinstance(value, bool):
         raise ValueError(f"{name} must be a byte count, e.g. 2000000000 or '2GB'; got {value!r}")
+    fraction_form = False  # a RAM fraction is written as one: 0.25, "0.25" (never 1 or "1")
     if isinstance(value, int | float):
         num, unit = float(value), ""
+        fraction_form = isinstance(value, float)
     elif isinstance(value, str):
         m = re.fullmatch(r"\s*([0-9]*\.?[0-9]+(?:[eE][+-]?[0-9]+)?)\s*([A-Za-z]*)\s*", value)
         if not m or m.group(2).upper() not in _UNITS:
             raise ValueError(f"{name} must be a byte count such as '512MB', '2GB', '1.5GiB' or a "
                              f"RAM fraction such as '0.25'; got {value!r}")
         num, unit = float(m.group(1)), m.group(2).upper()
+        fraction_form = "." in m.group(1) and "e" not in m.group(1).lower()
     else:
         raise ValueError(f"{name} must be a byte count, e.g. 2000000000 or '2GB'; got {value!r}")
     if not num > 0 or num != num or num == float("inf"):
         raise ValueError(f"{name} must be positive and finite; got {value!r}")
-    if unit == "" and num <= 1.0:
+    if unit == "" and num <= 1.0 and fraction_form:
         return int(num * _physical_ram())
-    return int(num * _UNITS[unit])
+    return max(1, int(num * _UNITS[unit]))
 
 
 def memory_budget() -> int:

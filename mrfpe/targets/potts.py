@@ -66,28 +66,40 @@ def _default_bounds(n_states: int) -> np.ndarray:
     return np.array([[-2.0, 2.0]] + [[-3.0, 3.0]] * (n_states - 1))
 
 
+#: Most states a Potts target takes: it has one parameter per state, and its per-site
+#: one-hot counts grow with them (far beyond any model a sampler can explore).
+MAX_STATES = 1024
+
+
 def _check_states(n_states: Any) -> int:
-    if isinstance(n_states, bool) or not isinstance(n_states, int | np.integer) or n_states < 2:
-        raise ValueError(f"n_states must be an integer >= 2; got {n_states!r}")
+    if isinstance(n_states, bool) or not isinstance(n_states, int | np.integer) \
+            or not 2 <= n_states <= MAX_STATES:
+        raise ValueError(f"n_states must be an integer in [2, {MAX_STATES}]; got {n_states!r}")
     return int(n_states)
 
 
 def _configs(x: Any, n_states: int | None, name: str = "configurations") -> tuple[np.ndarray, int]:
     """Validate (H, W) or (M, H, W) integer states; return (M, H, W) int64 and q."""
     arr = np.asarray(x)
-    if arr.dtype.kind == "f" and np.all(np.isfinite(arr)) and np.all(arr == np.round(arr)):
-        arr = arr.astype(np.int64)
-    if arr.dtype.kind not in "iu":
+    if arr.dtype.kind not in "iuf":
         raise ValueError(f"{name} must hold integer states; got dtype {arr.dtype}")
     if arr.ndim == 2:
         arr = arr[None]
     if arr.ndim != 3 or min(arr.shape) < 1:
         raise ValueError(f"{name} must have shape (H, W) or (M, H, W); got {np.shape(x)}")
+    # range first, in the data's own type: a cast of 1e19 to int64 wraps around
+    lo, hi = arr.min(), arr.max()
+    if arr.dtype.kind == "f" and not (np.all(np.isfinite(arr)) and np.all(arr == np.round(arr))):
+        raise ValueError(f"{name} must hold integer states; got non-integer values of dtype "
+                         f"{arr.dtype}")
+    top = MAX_STATES - 1 if n_states is None else _check_states(n_states) - 1
+    if lo < 0 or hi > top:
+        limit = (f"n_states={top + 1}" if n_states is not None
+                 else f"at most {MAX_STATES} states")
+        raise ValueError(f"{name} must lie in [0, {top}] ({limit}); "
+                         f"got values in [{lo.item()!r}, {hi.item()!r}]")
     arr = arr.astype(np.int64)
-    q = max(2, int(arr.max()) + 1) if n_states is None else _check_states(n_states)
-    if arr.min() < 0 or arr.max() >= q:
-        raise ValueError(f"{name} must lie in [0, {q - 1}] for n_states={q}; "
-                         f"got [{arr.min()}, {arr.max()}]")
+    q = max(2, int(hi) + 1) if n_states is None else top + 1
     return arr, q
 
 

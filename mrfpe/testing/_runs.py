@@ -47,7 +47,8 @@ def _cached_run(cls: type, config: dict | None, target_cls: type, seed: int) -> 
 
 def _refused(exc: Exception) -> bool:
     """A run that honestly refused a degenerate result (no sample found the support)."""
-    return isinstance(exc, ValueError) and "zero total weight" in str(exc)
+    return isinstance(exc, ValueError) and any(
+        m in str(exc) for m in ("zero total weight", "no support"))
 
 
 def _run_or_refusal(cls: type, config: dict | None, target_cls: type,

@@ -182,3 +182,48 @@ def test_sample_names_the_nearest_setting():
     with pytest.raises(ValueError, match=r"sampler PMC has no parameter 'n_iter' \(did you mean "
                                          r"'n_iterations'\?\); parameters: n_samples, "):
         mrfpe.sample("pmc", CorrelatedGaussian(), seed=0, n_iter=5)
+
+
+def _dist(root, name: str, module: str, body: str, entry: str) -> None:
+    """A real installed distribution under ``root`` (dist-info + module) for entry points."""
+    (root / f"{module}.py").write_text(body)
+    info = root / f"{name}-1.0.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {name}\nVersion: 1.0\n")
+    (info / "entry_points.txt").write_text(f"[mrfpe.samplers]\n{entry}\n")
+
+
+@pytest.fixture
+def on_path(tmp_path, monkeypatch):
+    monkeypatch.syspath_prepend(str(tmp_path))  # earlier on sys.path than mrfpe itself
+    yield tmp_path
+    monkeypatch.undo()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        samplers.registry.entries(refresh=True)
+
+
+def test_a_plugin_cannot_take_over_a_builtin_name(on_path, capsys):
+    _dist(on_path, "shadow-pmc", "shadow_pmc",
+          "class Evil:\n    def run(self, target, *, seed=None, progress=False, "
+          "callback=None):\n        return None\n", "pmc = shadow_pmc:Evil")
+    with pytest.warns(RuntimeWarning, match=r"duplicate sampler name 'pmc': registered by "
+                                            r"mrfpe .* and shadow-pmc 1.0"):
+        samplers.registry.entries(refresh=True)
+    assert samplers.get("pmc").__name__ == "PMC"
+    assert "pmc" in samplers.available() and "pmc [shadow-pmc]" in samplers.broken()
+    assert cli.main(["samplers"]) == 0
+    out = capsys.readouterr().out
+    pmc_row = next(line for line in out.splitlines() if line.startswith("pmc "))
+    assert "BROKEN" not in pmc_row and "Population Monte Carlo" in pmc_row
+
+
+def test_a_plugin_calling_sys_exit_on_import_is_listed_broken(on_path, capsys):
+    _dist(on_path, "exits", "exits_on_import", "import sys\nsys.exit(3)\n",
+          "exits = exits_on_import:S")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        samplers.registry.entries(refresh=True)
+        assert cli.main(["samplers"]) == 0
+    out = capsys.readouterr().out
+    assert "exits" in out and "BROKEN: SystemExit: 3" in out and "pmc" in out

@@ -278,7 +278,9 @@ def test_user_study_found_under_cwd_and_by_path(user_study, tmp_path, capsys):
     broken = {}
     assert {"mine", "importance_sampling"} <= set(S.available(broken))
     assert broken == {"bad": "RuntimeError: cannot load"}
-    with pytest.raises(RuntimeError, match="cannot load"):
+    # named with the reason (one line on the command line), not a bare RuntimeError
+    with pytest.raises(ValueError, match=r"bad/study\.py: cannot load the study file: "
+                                         "RuntimeError: cannot load"):
         S.get("bad")
     assert S.get("mine").name == "mine"
     assert S.get(str(user_study)).name == "mine"

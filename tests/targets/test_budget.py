@@ -86,3 +86,11 @@ def test_build_progress(scene, capsys):
     t = get("pls", fresh, progress=True)
     assert np.isfinite(t.log_prob([0.5, 0.5, 0.5])).all()
     assert "progress" not in t.describe()["options"]
+
+
+def test_a_bare_one_is_one_byte_not_all_ram():
+    from mrfpe.targets.budget import _physical_ram, parse_bytes
+
+    assert parse_bytes("1") == 1 and parse_bytes(1) == 1
+    assert parse_bytes("1.0") == parse_bytes(1.0) == _physical_ram()
+    assert parse_bytes("0.25") == int(0.25 * _physical_ram())

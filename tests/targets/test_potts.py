@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import re
 
 import numpy as np
 import pytest
@@ -107,3 +108,13 @@ def test_bad_input():
         t.log_prob([[np.nan, 0.0]])
     with pytest.raises(ValueError, match=r"\(N, 2\)"):
         t.log_prob([[0.0, 0.0, 0.0]])
+
+
+@pytest.mark.parametrize(("value", "dtype"), [(2**40, np.int64), (10**7, np.int64),
+                                              (1e19, np.float64), (2**63 + 5, np.uint64)])
+def test_huge_state_values_are_refused_with_the_value(value, dtype):
+    x = np.zeros((4, 4), dtype=dtype)
+    x[0, 0] = value
+    with pytest.raises(ValueError, match=r"must lie in \[0, 1023\] \(at most 1024 states\); "
+                                         rf"got values in \[0(\.0)?, {re.escape(repr(value))}\]"):
+        get("potts", x)

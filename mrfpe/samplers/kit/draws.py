@@ -63,8 +63,10 @@ def draw_in_support(run: Any, target: Any, rng: np.random.Generator, n: int,
     counted) in batches of ``max(n, 32)`` until every row is finite or about
     ``max_draws`` extra candidates have been tried. Rows still -inf are then
     replaced by copies of finite draws when there are any (chains separate
-    through their moves); if none is finite the uniform draws are returned as
-    they are, so a sampler survives a target that is -inf almost everywhere.
+    through their moves), so a sampler survives a target that is -inf almost
+    everywhere; if none is finite, ``ValueError`` (:meth:`Run.require_support
+    <mrfpe.samplers.kit.Run.require_support>`): a target -inf everywhere has nothing
+    to sample.
 
     Returns
     -------
@@ -89,6 +91,8 @@ def draw_in_support(run: Any, target: Any, rng: np.random.Generator, n: int,
         good = np.flatnonzero(np.isfinite(lpc))[: bad.size]
         theta[bad[: good.size]], lp[bad[: good.size]] = cand[good], lpc[good]
     bad = ~np.isfinite(lp)
+    if bad.all():
+        run.require_support(f"as uniform draws in the bounds ({n_tried} draws)")
     if bad.any() and not bad.all():
         src = rng.choice(np.flatnonzero(~bad), size=int(bad.sum()))
         theta[bad], lp[bad] = theta[src], lp[src]

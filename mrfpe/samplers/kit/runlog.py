@@ -18,6 +18,7 @@ import numpy as np
 import xarray as xr
 
 from mrfpe.posterior import build
+from mrfpe.targets.budget import check_memory
 
 __all__ = ["Run"]
 
@@ -35,15 +36,29 @@ class Run:
         the posterior's ``wall_time_s``.
     callback : ``callback(step, info)`` after each step; ``info`` holds ``ess``,
         ``map_log_target``, ``n_target_evals`` and the sampler's extras.
+    rows : how many parameter vectors (particles, kept states, history rows, one
+        float per step) the sampler will hold at once: checked against the memory
+        budget (:func:`mrfpe.targets.memory_budget`) before anything is allocated,
+        so an oversized setting fails at once, not with a bare ``MemoryError``.
+    check_first_step : raise at the first :meth:`step` if no point evaluated so far was
+        finite (:meth:`require_support`); ``False`` for samplers whose first step sees
+        too few points to judge (a multi-start optimiser's first optimum).
     """
 
     def __init__(self, target: Any, n_steps: int | None, *, progress: bool = False,
-                 callback: Callable[[int, dict], Any] | None = None, desc: str = ""):
+                 callback: Callable[[int, dict], Any] | None = None, desc: str = "",
+                 rows: float = 0, check_first_step: bool = True):
         if callback is not None and not callable(callback):
             raise ValueError(f"callback must be callable or None; got {callback!r}")
         self.target = target
         self.d = len(target.param_names)
+        check_memory(8.0 * (self.d + 4) * float(rows),
+                     f"sampler {desc or '?'} holding {float(rows):.3g} rows of {self.d} "
+                     "parameters", "lower its sample, chain or step counts")
         self.n_evals = 0.0
+        self.n_points = 0  # points evaluated, and whether any was finite (no support?)
+        self.seen_finite = False
+        self.check_first_step = check_first_step
         self.best_theta = np.full(self.d, np.nan)
         self.best_lt = -np.inf
         self.map_theta: list[np.ndarray] = []
@@ -62,13 +77,36 @@ class Run:
             self._bar = tqdm(total=n_steps, desc=desc, leave=False, file=sys.stderr)
 
     def evaluate(self, fn: Any, theta: np.ndarray) -> np.ndarray:
-        """``fn.log_prob(theta)`` with NaN -> -inf, counting ``fn.cost`` per row."""
+        """``fn.log_prob(theta)`` with NaN -> -inf, counting ``fn.cost`` per row.
+
+        Raises ``ValueError`` at once if a value is ``+inf``: no log density takes
+        it, and every weight or acceptance computed from it would be NaN.
+        """
         theta = np.asarray(theta, dtype=np.float64)
         lp = np.asarray(fn.log_prob(theta), dtype=np.float64).reshape(-1)
         if lp.shape[0] != theta.shape[0]:
             raise ValueError(f"log_prob returned {lp.shape[0]} values for {theta.shape[0]} rows")
         self.n_evals += float(getattr(fn, "cost", 1.0)) * theta.shape[0]
+        if np.isposinf(lp).any():
+            i = int(np.flatnonzero(np.isposinf(lp))[0])
+            raise ValueError(f"the target's log_prob is +inf at {int(np.isposinf(lp).sum())} of "
+                             f"{lp.size} points (e.g. theta={theta[i].tolist()}); a log "
+                             "density must be finite or -inf")
+        self.n_points += lp.size
+        self.seen_finite = self.seen_finite or bool(np.isfinite(lp).any())
         return np.where(np.isnan(lp), -np.inf, lp)
+
+    def require_support(self, where: str) -> None:
+        """Raise ``ValueError`` if every point evaluated so far was ``-inf`` or NaN.
+
+        Samplers call it (through :func:`draw_in_support` and the first
+        :meth:`step`) so that a target without support in its bounds stops the run
+        before the work, instead of ending as a posterior of meaningless points.
+        """
+        if self.n_points and not self.seen_finite:
+            raise ValueError(f"the target's log_prob is -inf or NaN at all {self.n_points} "
+                             f"points evaluated {where}: it has no support in its bounds that "
+                             "the sampler can find (is the data or the target misconfigured?)")
 
     def offer(self, theta: np.ndarray, log_target: np.ndarray) -> None:
         """Update the best-so-far point with full-target values ``log_target`` of ``theta``."""
@@ -87,7 +125,13 @@ class Run:
         self.offer(theta[i:i + 1], self.evaluate(self.target, theta[i:i + 1]))
 
     def step(self, step: int, ess_value: float, **info: Any) -> None:
-        """Close a step: append the MAP trace and ESS, update the bar, call the callback."""
+        """Close a step: append the MAP trace and ESS, update the bar, call the callback.
+
+        The first step raises ``ValueError`` if no point evaluated so far was finite
+        (:meth:`require_support`).
+        """
+        if not self.ess and self.check_first_step:
+            self.require_support("in the first step")
         self.map_theta.append(self.best_theta.copy())
         self.map_log_target.append(self.best_lt)
         self.ess.append(float(ess_value))

@@ -116,7 +116,8 @@ class AdaptiveTemperingSMC(Sampler):
         lo, hi = b[:, 0], b[:, 1]
         n, d = self.n_particles, b.shape[0]
         rng = np.random.default_rng(seed)
-        run = kit.Run(target, None, progress=progress, callback=callback, desc=self.name)
+        run = kit.Run(target, None, progress=progress, callback=callback, desc=self.name,
+                      rows=8 * n)
         # Stage 0: uniform draws, redrawn where the target vanishes (π_0+ is uniform on the
         # support; up to 20 batches of N candidates).
         x, lp, share = kit.draw_in_support(run, target, rng, n, b, max_draws=20 * n,

@@ -1,0 +1,142 @@
+"""Content checksums in written netCDF files, and the readers on damaged files (fuzzed)."""
+
+from __future__ import annotations
+
+import errno
+import warnings
+from pathlib import Path
+
+import netCDF4
+import numpy as np
+import pytest
+import xarray as xr
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from mrfpe import checksum, netcdf
+from mrfpe import posterior as P
+from mrfpe.scene import Scene
+
+RESULTS = Path(__file__).resolve().parents[1] / "docs" / "results"
+
+
+def _post():
+    rng = np.random.default_rng(0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", P.PosteriorWarning)
+        return P.build(rng.random((40, 3)), rng.normal(size=40), param_names=["a", "b", "c"],
+                       log_weight=rng.normal(size=40), sampler="t", config={"n": 40}, seed=3,
+                       target={"class": "T"})
+
+
+@pytest.fixture(scope="module")
+def written(tmp_path_factory):
+    """A posterior and a scene written by mrfpe, with their bytes."""
+    from mrfpe.synthetic import make_scene
+
+    d = tmp_path_factory.mktemp("written")
+    P.save(_post(), d / "post.nc")
+    make_scene(brdf="ward", theta=[0.3, 0.2, 0.1], shape=(6, 6), n_labels=3,
+               seed=0).save(d / "scene.nc")
+    return {name: (d / f"{name}.nc").read_bytes() for name in ("post", "scene")}
+
+
+def test_every_written_file_carries_a_checksum_that_readers_hide(tmp_path):
+    path = tmp_path / "p.nc"
+    P.save(_post(), path)
+    with netCDF4.Dataset(path) as nc:
+        assert nc.getncattr(checksum.ATTR).startswith("sha256:")
+        assert checksum.verify(nc, str(path))
+    assert checksum.ATTR not in P.load(path).attrs
+    assert checksum.ATTR not in netcdf.read_attrs(path)
+    xr.testing.assert_identical(P.load(path), _post())
+
+
+def test_a_changed_value_is_refused_naming_the_file(tmp_path):
+    """The audit's case: a flipped data value loads silently without a checksum."""
+    path = tmp_path / "p.nc"
+    P.save(_post(), path)
+    with netCDF4.Dataset(path, "r+") as nc:  # a change HDF5 itself cannot notice
+        nc.variables["theta"][0, 0] = 0.5
+    for read in (P.load, netcdf.read_attrs, lambda p: netcdf.open_dataset(p, "posterior")):
+        with pytest.raises(ValueError, match=rf"^{path}: damaged file"):
+            read(path)
+
+
+def test_files_without_a_checksum_still_load(tmp_path):
+    """Files of earlier versions (no checksum) are accepted; the committed results too."""
+    path = tmp_path / "old.nc"
+    xr.Dataset({"x": ("i", np.arange(3.0))}, attrs={"k": "v"}).to_netcdf(path)
+    assert netcdf.read_attrs(path) == {"k": "v"}
+    committed = sorted(RESULTS.glob("**/trials/*.nc"))[:3]
+    for p in committed:
+        netcdf.open_dataset(p, "trial")
+
+
+def _damage(data: bytes, kind: str, pos: float, length: int, byte: int) -> bytes:
+    i = int(pos * (len(data) - 1))
+    if kind == "truncate":
+        return data[:i]
+    if kind == "flip":
+        return data[:i] + bytes([data[i] ^ (1 << (byte % 8))]) + data[i + 1:]
+    if kind == "splice":  # a block overwritten with copies of another part of the file
+        j = (i + length * 7) % max(1, len(data) - length)
+        return data[:i] + data[j:j + length] + data[i + length:]
+    return bytes(byte for _ in range(length))  # "random": not a netCDF file at all
+
+
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+                                                                 HealthCheck.function_scoped_fixture])
+@given(kind=st.sampled_from(["truncate", "flip", "splice", "random"]),
+       pos=st.floats(0, 1), length=st.integers(1, 512), byte=st.integers(0, 255),
+       which=st.sampled_from(["post", "scene"]))
+def test_property_damaged_files_are_refused_or_unchanged(written, tmp_path_factory, kind, pos,
+                                                         length, byte, which):
+    """Every reader either refuses a damaged file with a ValueError naming it, or returns
+    exactly what was written (a change in unused bytes): never different data."""
+    original = written[which]
+    path = tmp_path_factory.mktemp("fuzz") / f"{which}.nc"
+    path.write_bytes(_damage(original, kind, pos, length, byte))
+    clean = path.with_name("clean.nc")
+    clean.write_bytes(original)
+    if which == "post":
+        readers = [P.load, netcdf.read_attrs]
+        compare = [lambda a, b: xr.testing.assert_identical(a, b), lambda a, b: a == b]
+    else:
+        readers = [Scene.load, lambda p: netcdf.open_dataset(p, "scene")]
+        compare = [lambda a, b: xr.testing.assert_identical(a.to_dataset(), b.to_dataset()),
+                   lambda a, b: xr.testing.assert_identical(a, b)]
+    for read, same in zip(readers, compare):
+        try:
+            got = read(path)
+        except ValueError as exc:
+            assert str(exc).startswith(str(path)), exc
+            continue
+        same(got, read(clean))
+
+
+def test_disk_full_is_named_and_leaves_nothing(tmp_path, monkeypatch):
+    """The netCDF library says "HDF error"; mrfpe names the file and the full disk."""
+    def full(self, path, **kw):
+        Path(path).write_bytes(b"\x89HDF partial")
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(xr.Dataset, "to_netcdf", full)
+    with pytest.raises(netcdf.DiskFullError, match=rf"^{tmp_path}/p.nc: no space left on the "
+                                                    "device to write the posterior file"):
+        P.save(_post(), tmp_path / "p.nc")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_hdf_error_on_a_full_file_system_is_named(tmp_path, monkeypatch):
+    """No errno (HDF5's way): the free space decides."""
+    def hdf_error(self, path, **kw):
+        raise RuntimeError("NetCDF: HDF error")
+
+    monkeypatch.setattr(xr.Dataset, "to_netcdf", hdf_error)
+    monkeypatch.setattr(netcdf, "_free_bytes", lambda d: 0)
+    with pytest.raises(netcdf.DiskFullError, match="no space left"):
+        netcdf.write_atomic(_post(), tmp_path / "p.nc")
+    monkeypatch.setattr(netcdf, "_free_bytes", lambda d: 1 << 40)
+    with pytest.raises(RuntimeError, match="HDF error"):  # plenty of space: not a full disk
+        netcdf.write_atomic(_post(), tmp_path / "p.nc")

@@ -118,7 +118,8 @@ class Exchange(Sampler):
         n, c, d = self.n_steps, self.n_chains, bounds.shape[0]
         exact = bool(getattr(target, "exact_simulator", False))
         sweeps = self._initial_sweeps(target)
-        run = Run(target, n, progress=progress, callback=callback, desc=self.name)
+        run = Run(target, n, progress=progress, callback=callback, desc=self.name,
+                  rows=n + c * (n // self.thin + self.burn_in + 4))
         x, lp = draw_in_support(run, target, rng, c, bounds)
         walk = AdaptiveRandomWalk(bounds, c, self.proposal_sd, self.burn_in, self.adapt,
                                   self.target_acceptance)

@@ -96,7 +96,6 @@ def main(out_dir: str | Path = "mrfpe-demo", quick: bool = False, seed: int = 0)
     from mrfpe.demo.figure import CAPTION, posterior_figure
     from mrfpe.studies.report import mean_sd
     from mrfpe.synthetic import make_scene
-
     from mrfpe.validation import check_seed
 
     if seed is None:

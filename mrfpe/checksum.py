@@ -1,110 +1,110 @@
-"""A content checksum inside every netCDF file mrfpe writes.
+"""A checksum sealing every netCDF file mrfpe writes, checked before the file is parsed.
 
-HDF5 keeps checksums on some of its metadata but none on the data: a flipped
-bit in a variable, or a spliced block that happens to parse, loads without an
-error. :func:`stamp` adds a SHA-256 of the file's whole content (dimensions,
-variables with their types, shapes, attributes and raw values, the global
-attributes) as the global attribute :data:`ATTR`; :func:`verify` recomputes it
-and raises when it differs. Files written before checksums existed carry none
-and are accepted as they are.
+HDF5 keeps checksums on some of its metadata but none on the data: a flipped bit
+in a variable, or a spliced block that happens to parse, loads without an error
+-- and some damaged metadata sends the HDF5 library into an endless loop while
+it parses an attribute. :func:`stamp` therefore appends a trailer to the
+finished file,
 
-A leaf module (numpy, netCDF4 and hashlib only): :mod:`mrfpe.netcdf` calls it
-on every write and every read.
+    ``b"\\nmrfpe-sha256:" + <64 hex digits> + b"\\n"``,
+
+the SHA-256 of every byte before it. HDF5 ignores bytes after its end of file,
+so netCDF4, xarray and every other reader open a sealed file as before.
+:func:`verify` recomputes the digest from the raw bytes *before* the file is
+handed to HDF5 and raises :class:`ChecksumError` when it differs, so a damaged
+sealed file is refused without being parsed. A file without a trailer (written
+before checksums existed, or by another program) is accepted as it is; a
+truncated sealed file has lost its trailer, and HDF5 refuses it at once (its end
+of file lies before the address its superblock records).
+
+A leaf module (hashlib and os only): :mod:`mrfpe.netcdf` calls it on every write
+and every read.
 """
 
 from __future__ import annotations
 
 import hashlib
 import os
-from typing import Any
 
-import numpy as np
+__all__ = ["PREFIX", "TRAILER_BYTES", "ChecksumError", "digest", "stamp", "verify"]
 
-__all__ = ["ATTR", "ChecksumError", "digest", "stamp", "verify"]
-
-#: The global attribute holding ``"sha256:<hex>"``.
-ATTR = "mrfpe_checksum"
-_ALGORITHM = "sha256"
+#: What a trailer starts with.
+PREFIX = b"\nmrfpe-sha256:"
+#: Length of a trailer: the prefix, 64 hex digits and a newline.
+TRAILER_BYTES = len(PREFIX) + 64 + 1
+_CHUNK = 1 << 20
 
 
 class ChecksumError(ValueError):
-    """A file's content does not match the checksum stored in it."""
+    """A file's bytes do not match the checksum sealed into it."""
 
 
-def _feed_value(h: Any, value: Any) -> None:
-    """Hash one attribute value or variable's data, type included (1 and 1.0 differ)."""
-    a = np.asarray(value)
-    if a.dtype.kind in "OUS":  # strings (netCDF vlen or char): their UTF-8 bytes, lengths first
-        items = [x.decode("utf-8", "surrogateescape") if isinstance(x, bytes) else str(x)
-                 for x in a.reshape(-1)]
-        h.update(f"str{a.shape}".encode())
-        for s in items:
-            b = s.encode("utf-8", "surrogatepass")
-            h.update(len(b).to_bytes(8, "little") + b)
-        return
-    h.update(f"{a.dtype.str}{a.shape}".encode())
-    h.update(np.ascontiguousarray(a).tobytes())
+def digest(path: str | os.PathLike, n_bytes: int) -> str:
+    """SHA-256 (hex) of the first ``n_bytes`` bytes of the file at ``path``."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        left = n_bytes
+        while left > 0:
+            block = f.read(min(_CHUNK, left))
+            if not block:
+                break
+            h.update(block)
+            left -= len(block)
+    return h.hexdigest()
 
 
-def _feed_attrs(h: Any, obj: Any, skip: str = "") -> None:
-    for name in sorted(obj.ncattrs()):
-        if name == skip:
-            continue
-        h.update(b"\x00attr:" + name.encode())
-        _feed_value(h, obj.getncattr(name))
+#: How far from the end a damaged trailer's prefix is still recognised.
+_SEARCH = 4096
 
 
-def digest(nc: Any) -> str:
-    """``"sha256:<hex>"`` of an open ``netCDF4.Dataset``'s content, :data:`ATTR` excluded."""
-    h = hashlib.new(_ALGORITHM)
+def _trailer(path: str | os.PathLike, where: str) -> tuple[int, str] | None:
+    """``(bytes before the trailer, stored hex digest)``, or None for an unsealed file.
 
-    def group(g: Any, path: str) -> None:
-        h.update(f"\x00group:{path}".encode())
-        for name in sorted(g.dimensions):
-            h.update(f"\x00dim:{name}={len(g.dimensions[name])}".encode())
-        _feed_attrs(h, g, skip=ATTR if path == "/" else "")
-        for name in sorted(g.variables):
-            var = g.variables[name]
-            var.set_auto_maskandscale(False)
-            var.set_auto_chartostring(False)
-            h.update(f"\x00var:{name}:{var.dtype}:{var.dimensions}".encode())
-            _feed_attrs(h, var)
-            _feed_value(h, var[...])
-        for name in sorted(g.groups):
-            group(g.groups[name], f"{path}{name}/")
-
-    group(nc, "/")
-    return f"{_ALGORITHM}:{h.hexdigest()}"
+    A prefix near the end that does not form a whole trailer means a sealed file
+    whose end was damaged: :class:`ChecksumError`.
+    """
+    size = os.path.getsize(path)
+    with open(path, "rb") as f:
+        f.seek(max(0, size - _SEARCH))
+        tail = f.read()
+    ok = tail.endswith(b"\n") and tail[-TRAILER_BYTES:].startswith(PREFIX)
+    if ok:
+        text = tail[-TRAILER_BYTES + len(PREFIX):-1]
+        ok = len(text) == 64 and all(c in b"0123456789abcdef" for c in text)
+    if ok:
+        return size - TRAILER_BYTES, text.decode("ascii")
+    if PREFIX[1:] in tail:
+        raise ChecksumError(f"{where}: damaged file: its checksum trailer is damaged (the "
+                            f"file was changed or corrupted after it was written)")
+    return None
 
 
 def stamp(path: str | os.PathLike) -> str:
-    """Compute the checksum of the netCDF file at ``path`` and store it in the file."""
-    import netCDF4
-
-    with netCDF4.Dataset(path, "r+") as nc:
-        value = digest(nc)
-        nc.setncattr(ATTR, value)
+    """Seal the finished file at ``path``: append the trailer; return the digest."""
+    value = digest(path, os.path.getsize(path))
+    with open(path, "ab") as f:
+        f.write(PREFIX + value.encode("ascii") + b"\n")
     return value
 
 
-def verify(nc: Any, where: str) -> bool:
-    """Check an open ``netCDF4.Dataset`` against its stored checksum.
+def verify(path: str | os.PathLike, where: str | None = None) -> bool:
+    """Check the file at ``path`` against its trailer, without parsing it.
 
-    Returns ``False`` when the file carries no checksum (written before
-    checksums existed), ``True`` when it matches.
+    Returns ``False`` when the file carries no trailer (written before checksums
+    existed, or by another program), ``True`` when the bytes match it.
 
     Raises
     ------
     ChecksumError
-        ``"<where>: damaged file: its content does not match the checksum stored
-        in it ..."`` when it does not match (or the stored value is not one).
+        ``"<where>: damaged file: its bytes do not match the checksum sealed into
+        it ..."`` when they do not match.
     """
-    if ATTR not in nc.ncattrs():
+    found = _trailer(path, str(where or path))
+    if found is None:
         return False
-    stored = nc.getncattr(ATTR)
-    actual = digest(nc)
-    if stored != actual:
-        raise ChecksumError(f"{where}: damaged file: its content does not match the checksum "
-                            f"stored in it (the file was changed or corrupted after it was "
-                            f"written)")
+    n_bytes, stored = found
+    if digest(path, n_bytes) != stored:
+        raise ChecksumError(f"{where or path}: damaged file: its bytes do not match the "
+                            f"checksum sealed into it (the file was changed or corrupted "
+                            f"after it was written)")
     return True

@@ -5,9 +5,9 @@ runner, :func:`mrfpe.posterior.load` and :meth:`mrfpe.scene.Scene.load` read
 through :func:`open_dataset`, so a truncated or corrupt file gives one line --
 ``run.nc: not a readable netCDF posterior file (NetCDF: HDF error)`` -- instead
 of a bare ``OSError: HDF error`` from deep inside the HDF5 library.
-:func:`write_atomic` never leaves a partial file under the final name, stamps
-a content checksum into every file (:mod:`mrfpe.checksum`) that every reader
-verifies, and names a full disk as such (:class:`DiskFullError`).
+:func:`write_atomic` never leaves a partial file under the final name, seals
+every file with a checksum of its bytes (:mod:`mrfpe.checksum`) that every reader
+verifies before parsing, and names a full disk as such (:class:`DiskFullError`).
 """
 
 from __future__ import annotations
@@ -22,7 +22,6 @@ from typing import Any
 
 import xarray as xr
 
-from mrfpe.checksum import ATTR as CHECKSUM_ATTR
 from mrfpe.checksum import ChecksumError, stamp, verify
 
 __all__ = ["TMP_SUFFIX", "ChecksumError", "DiskFullError", "check_readable", "check_writable",
@@ -164,20 +163,21 @@ def open_dataset(path: str | os.PathLike, what: str = "data", **kwargs: Any) -> 
         # decoders anything from ValueError to AttributeError on garbage metadata.
         # All mean: not this file.
         raise _unreadable(p, what, exc) from exc
-    ds.attrs.pop(CHECKSUM_ATTR, None)
     return ds
 
 
 def _verified_attrs(p: Path, what: str) -> dict[str, Any]:
-    """The global attributes of ``p`` after checking its content against its checksum."""
+    """The global attributes of ``p`` after checking its bytes against its checksum.
+
+    The checksum is checked first, on the raw bytes: a damaged sealed file never
+    reaches the HDF5 parser.
+    """
     import netCDF4
 
+    verify(p, str(p))
     try:
         with netCDF4.Dataset(p) as nc:
-            verify(nc, str(p))
-            return {k: nc.getncattr(k) for k in nc.ncattrs() if k != CHECKSUM_ATTR}
-    except ChecksumError:
-        raise
+            return {k: nc.getncattr(k) for k in nc.ncattrs()}
     except Exception as exc:
         raise _unreadable(p, what, exc) from exc
 
@@ -224,7 +224,7 @@ def write_atomic(ds: xr.Dataset, path: str | os.PathLike, what: str = "output",
                  **kwargs: Any) -> Path:
     """Write ``ds`` to ``path`` so that ``path`` is either absent, old, or complete.
 
-    Writes a temporary file beside it, stamps its content checksum into it
+    Writes a temporary file beside it, seals it with a checksum of its bytes
     (:func:`mrfpe.checksum.stamp`), ``fsync``s it, then ``os.replace``s it over
     ``path`` (and syncs the directory): a kill or power loss mid-write leaves at
     most a ``*.tmp`` file, never a partial ``path``. ``kwargs`` go to

@@ -279,7 +279,7 @@ class Scene:
         )
 
     def save(self, path: str | Path) -> None:
-        """Write the scene to a netCDF4 file, atomically and with a content checksum
+        """Write the scene to a netCDF4 file, atomically and sealed with a checksum
         (:func:`mrfpe.netcdf.write_atomic`)."""
         from mrfpe.netcdf import write_atomic
 

@@ -152,6 +152,7 @@ def _check_existing(study: Study, todo: list[Task], trials_dir: Path, mismatch: 
             continue
         try:
             attrs = read_attrs(path, "trial")
+            _check_json_attrs(attrs, path)
         except ValueError as exc:  # truncated or corrupt: say so, then compute it again
             notes.append(f"{exc}; computing it again")
             pending.append(task)
@@ -172,6 +173,21 @@ def _check_existing(study: Study, todo: list[Task], trials_dir: Path, mismatch: 
             f"different configuration ({_diff(old, task.config)}); they are not reused. "
             "Choose another --out, or delete those files to recompute them.")
     return pending, done
+
+
+def _check_json_attrs(attrs: dict, path: Path) -> None:
+    """ValueError naming ``path`` when a trial's JSON attribute does not parse.
+
+    A sealed trial file is checked by its checksum; this catches a file without
+    one (an earlier version's, or one edited in place) whose attributes were damaged.
+    """
+    for key in ("cell", "trial_config"):
+        if key in attrs:
+            try:
+                json.loads(attrs[key])
+            except (TypeError, json.JSONDecodeError):
+                raise ValueError(f"{path}: damaged trial file: its {key!r} attribute is not "
+                                 f"JSON") from None
 
 
 def _check_owner(study: Study, out: Path, force: bool) -> None:

@@ -163,7 +163,7 @@ class ExactTarget(ModelTarget):
 
 
 class LikelihoodTarget(ModelTarget):
-    """Unnormalised log-likelihood ``sum_m S(x_m) . psi(theta)`` with a simulator.
+    """Unnormalised log-likelihood ``sum_m S(x_m)·psi(theta)`` with a simulator.
 
     ``log_prob`` omits ``-M log Z(theta)``: it is *not* a density over theta on
     its own. Samplers for doubly-intractable posteriors use it with

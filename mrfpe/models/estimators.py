@@ -182,7 +182,7 @@ class LikelihoodTarget(ModelTarget):
         return int(self.x.shape[0])
 
     def unnormalised(self, theta: Any, x: Any = None) -> np.ndarray:
-        """``S(x) . psi(theta)`` (N,) for configurations ``x`` (default the data, summed)."""
+        """``S(x)·psi(theta)`` (N,) for configurations ``x`` (default the data, summed)."""
         theta = as_theta_batch(theta, self.ndim)
         s = self._stats if x is None else self.sufficient_statistics(x).sum(axis=0)
         return self.design.psi(theta) @ s

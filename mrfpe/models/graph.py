@@ -134,7 +134,7 @@ class Graph:
         return sp.csr_matrix((ones, (rows, cols)), shape=(self.n_nodes, self.n_nodes))
 
     def colouring(self) -> np.ndarray:
-        """A proper colouring (n_nodes,) int64: colours ``0 .. n_colours - 1``."""
+        """A proper colouring (n_nodes,) int64: colours from 0 to ``n_colours - 1``."""
         if self._colours is None:
             colours = _greedy_colouring(self)
             colours.setflags(write=False)

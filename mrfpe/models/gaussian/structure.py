@@ -189,7 +189,7 @@ class CARStructure:
         return self._intervals
 
     def vertices(self) -> np.ndarray | None:
-        """Points ``lambda`` whose half-spaces ``beta . lambda < 1`` make up the PD region.
+        """Points ``lambda`` whose half-spaces ``beta·lambda < 1`` make up the PD region.
 
         The convex-hull vertices of the joint spectrum (or its extremes for one
         coupling type); None when the joint spectrum is unknown (then PD is

@@ -170,6 +170,9 @@ class LikelihoodTarget(ModelTarget):
     :meth:`simulate` (auxiliary draws at a proposed theta).
     """
 
+    #: ``log_prob`` is not a density over theta (it omits ``-M log Z(theta)``).
+    normalised = False
+
     def __init__(self, *, sampler: str = "auto", n_sweeps: int = 200, **kwargs: Any) -> None:
         super().__init__(**kwargs)
         self.sampler = sampler

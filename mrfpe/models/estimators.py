@@ -163,12 +163,15 @@ class ExactTarget(ModelTarget):
 
 
 class LikelihoodTarget(ModelTarget):
-    """Unnormalised log-likelihood ``sum_m S(x_m) . psi(theta)`` with a simulator.
+    """Unnormalised log-likelihood ``sum_m S(x_m)·psi(theta)`` with a simulator.
 
     ``log_prob`` omits ``-M log Z(theta)``: it is *not* a density over theta on
     its own. Samplers for doubly-intractable posteriors use it with
     :meth:`simulate` (auxiliary draws at a proposed theta).
     """
+
+    #: ``log_prob`` is not a density over theta (it omits ``-M log Z(theta)``).
+    normalised = False
 
     def __init__(self, *, sampler: str = "auto", n_sweeps: int = 200, **kwargs: Any) -> None:
         super().__init__(**kwargs)
@@ -182,7 +185,7 @@ class LikelihoodTarget(ModelTarget):
         return int(self.x.shape[0])
 
     def unnormalised(self, theta: Any, x: Any = None) -> np.ndarray:
-        """``S(x) . psi(theta)`` (N,) for configurations ``x`` (default the data, summed)."""
+        """``S(x)·psi(theta)`` (N,) for configurations ``x`` (default the data, summed)."""
         theta = as_theta_batch(theta, self.ndim)
         s = self._stats if x is None else self.sufficient_statistics(x).sum(axis=0)
         return self.design.psi(theta) @ s

@@ -40,8 +40,8 @@ _OFFSET_NAMES = {(0, 1): "horizontal", (1, 0): "vertical", (1, 1): "diagonal",
 class Graph:
     """An undirected simple graph with typed edges (immutable).
 
-    Parameters / attributes
-    -----------------------
+    Parameters
+    ----------
     n_nodes : int
     edges : ndarray (E, 2) int64
         Each edge once, ``i < j``, sorted (given in any order and orientation).
@@ -134,7 +134,7 @@ class Graph:
         return sp.csr_matrix((ones, (rows, cols)), shape=(self.n_nodes, self.n_nodes))
 
     def colouring(self) -> np.ndarray:
-        """A proper colouring (n_nodes,) int64: colours ``0 .. n_colours - 1``."""
+        """A proper colouring (n_nodes,) int64: colours from 0 to ``n_colours - 1``."""
         if self._colours is None:
             colours = _greedy_colouring(self)
             colours.setflags(write=False)
@@ -341,7 +341,7 @@ def from_adjacency(adjacency: Any, edge_type: Any = None,
 
 
 def from_networkx(graph: Any, edge_type: str | None = None) -> Graph:
-    """A :class:`Graph` from a networkx graph (nodes relabelled ``0 .. n-1`` in node order).
+    """A :class:`Graph` from a networkx graph (nodes numbered from 0 in node order).
 
     ``edge_type`` names an edge attribute holding each edge's type (any hashable;
     types are numbered in sorted order of their string form).

@@ -1,12 +1,12 @@
 """Ready-made discrete models, each a few lines over :class:`mrfpe.models.MRF`.
 
-=================  ==============================================  =========================
-factory            log-potential (thesis 4.3-4.5, T = 1)           theta
-=================  ==============================================  =========================
-``potts``          ``J sum_<ij> [x_i = x_j] + sum_a h_a n_a(x)``   (coupling, field_1, ...)
-``ising``          ``J sum_<ij> s_i s_j + h sum_i s_i``, s = +-1    (coupling, field)
-``autologistic``   ``eta sum_<ij> x_i x_j + sum_i (a + z_i . b) x_i``  (coupling, field, z...)
-=================  ==============================================  =========================
+=================  ===================================================  =======================
+factory            log-potential (thesis 4.3-4.5, T = 1)                theta
+=================  ===================================================  =======================
+``potts``          ``J sum_<ij> [x_i = x_j] + sum_a h_a n_a(x)``        coupling, field_1, ...
+``ising``          ``J sum_<ij> s_i s_j + h sum_i s_i``, s = +-1         coupling, field
+``autologistic``   ``eta sum_<ij> x_i x_j + sum_i (a + z_i·b) x_i``     coupling, field, z...
+=================  ===================================================  =======================
 
 ``potts(2)`` is the Ising model in the 0/1 coding, with coupling ``J`` and
 field ``h`` equal to twice the spin-convention ones (``delta(x_i, x_j) = (1 +

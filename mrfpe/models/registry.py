@@ -45,7 +45,7 @@ def names() -> list[str]:
 
 
 def get(name: str, /, **kwargs: Any) -> Model:
-    """The model registered as ``name``, built with ``kwargs`` (e.g. ``n_states=3``).
+    """The model registered as ``name``, built with ``kwargs`` (say ``n_states=3``).
 
     Raises
     ------

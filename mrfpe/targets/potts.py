@@ -30,6 +30,7 @@ Both are the short forms (``mrfpe.targets.get("potts", x)``) of the declared
 model ``mrfpe.models.potts(q, 4)``'s ``"pl"`` and ``"exact"`` estimators; the
 model also offers codings, block pseudolikelihood, other neighbourhoods and
 covariates (:mod:`mrfpe.models`).
+
 * :func:`gibbs_sample`: configurations drawn at known parameters by
   checkerboard Gibbs sweeps, reproducible from ``seed``.
 

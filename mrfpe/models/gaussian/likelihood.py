@@ -126,6 +126,8 @@ class GaussianLikelihoodTarget(GaussianTarget):
 
     #: Draws are exact (Cholesky / FFT): the exchange algorithm is then exact too.
     exact_simulator = True
+    #: ``log_prob`` is not a density over theta (it omits the log-determinant term).
+    normalised = False
 
     def __init__(self, *, sampler: str = "auto", **kwargs: Any) -> None:
         super().__init__(**kwargs)

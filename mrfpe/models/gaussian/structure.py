@@ -70,7 +70,7 @@ MAX_DENSE_SIMULATION = 1024
 MAX_DENSE_NODES = 4096
 #: Largest graph factorised by sparse LU (``"exact"`` without a known spectrum, simulation).
 MAX_SPARSE_NODES = 1 << 18
-#: ``1 - beta . lambda`` at or below this counts as singular (not positive definite).
+#: ``1 - beta·lambda`` at or below this counts as singular (not positive definite).
 PD_EPS = 1e-12
 
 
@@ -189,7 +189,7 @@ class CARStructure:
         return self._intervals
 
     def vertices(self) -> np.ndarray | None:
-        """Points ``lambda`` whose half-spaces ``beta . lambda < 1`` make up the PD region.
+        """Points ``lambda`` whose half-spaces ``beta·lambda < 1`` make up the PD region.
 
         The convex-hull vertices of the joint spectrum (or its extremes for one
         coupling type); None when the joint spectrum is unknown (then PD is

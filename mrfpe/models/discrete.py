@@ -29,7 +29,15 @@ import numpy as np
 from mrfpe.models.base import Model
 from mrfpe.models.design import FORBIDDEN, Design, check_configurations
 from mrfpe.models.graph import Graph, LatticeSpec, as_graph_spec
-from mrfpe.models.options import COMMON_OPTIONS, block_option, bounds_option, jsonable, nonneg_int
+from mrfpe.models.options import (
+    CODING_OPTION,
+    COMMON_OPTIONS,
+    block_option_spec,
+    bounds_option,
+    coding_nodes,
+    jsonable,
+    nonneg_int,
+)
 from mrfpe.models.terms import EdgeCovariate, Term
 from mrfpe.targets.base import Target
 from mrfpe.targets.options import Option, choice_check
@@ -69,13 +77,8 @@ COMMON = COMMON_OPTIONS
 
 ESTIMATOR_OPTIONS: dict[str, tuple[Option, ...]] = {
     "pl": COMMON,
-    "coding": (*COMMON, Option("coding", "int >= 0", 0, nonneg_int,
-                               "which colour class (Besag coding) 0 .. n_codings - 1")),
-    "block": (*COMMON, Option("block", "(bh, bw) | int | labels | list of arrays | None", None,
-                              block_option,
-                              "tiles (bh, bw) anchored at the top-left corner on a lattice; a "
-                              "node partition on a general graph; None: (2, 2) tiles on a "
-                              "lattice, connected blocks of 4 nodes on a graph")),
+    "coding": (*COMMON, CODING_OPTION),
+    "block": (*COMMON, block_option_spec("at most 4096 joint states per block")),
     "exact": (*COMMON, Option("method", "'auto' | 'enumerate' | 'eliminate'", "auto",
                               choice_check("auto", "enumerate", "eliminate"),
                               "log Z by enumeration (tiny) or variable elimination")),
@@ -309,16 +312,11 @@ class MRF(Model):
             return est.ConditionalTarget(rows=[design.conditional_rows(x)],
                                          nodes=np.arange(design.graph.n_nodes), **common)
         if estimator == "coding":
-            classes = design.graph.colour_classes()
-            k = options["coding"]
-            if k >= len(classes):
-                raise ValueError(f"coding must be in [0, {len(classes) - 1}] (the graph has "
-                                 f"{len(classes)} codings); got {k}")
-            return est.ConditionalTarget(rows=[design.conditional_rows(x, classes[k])],
-                                         nodes=classes[k],
-                                         cost=classes[k].size / design.graph.n_nodes,
-                                         extra={"coding": k, "n_codings": len(classes)},
-                                         **common)
+            nodes, n_codings = coding_nodes(design.graph, options["coding"])
+            return est.ConditionalTarget(rows=[design.conditional_rows(x, nodes)], nodes=nodes,
+                                         cost=nodes.size / design.graph.n_nodes,
+                                         extra={"coding": options["coding"],
+                                                "n_codings": n_codings}, **common)
         if estimator == "block":
             blocks = est.make_blocks(design.graph, options["block"], design.q)
             return est.ConditionalTarget(rows=design.block_rows(x, blocks), blocks=blocks,

@@ -17,8 +17,9 @@ from mrfpe.models.graph import Graph
 from mrfpe.targets.options import Option, optional
 from mrfpe.validation import check_positive_int
 
-__all__ = ["COMMON_OPTIONS", "block_option", "bounds_option", "covariates_option",
-           "jsonable", "node_blocks", "nonneg_int"]
+__all__ = ["CODING_OPTION", "COMMON_OPTIONS", "block_option", "block_option_spec",
+           "bounds_option", "coding_nodes", "covariates_option", "jsonable", "node_blocks",
+           "nonneg_int"]
 
 
 def covariates_option(name: str, value: Any) -> Any:
@@ -84,6 +85,29 @@ COMMON_OPTIONS: tuple[Option, ...] = (
     Option("bounds", "(d, 2) array | mapping name -> (low, high) | None", None,
            optional(bounds_option), "sampling-space bounds of theta (default: the model's)"),
 )
+
+
+#: ``coding=k``: which of the graph's colour classes a coding estimator sums.
+CODING_OPTION = Option("coding", "int >= 0", 0, nonneg_int,
+                       "which colour class (Besag coding) 0 .. n_codings - 1")
+
+
+def block_option_spec(limit: str) -> Option:
+    """The ``block`` option, its help ending with the model's block-size ``limit``."""
+    return Option("block", "(bh, bw) | int | labels | list of arrays | None", None,
+                  block_option,
+                  "tiles (bh, bw) anchored at the top-left corner on a lattice; a node "
+                  "partition on a general graph; None: (2, 2) tiles on a lattice, connected "
+                  f"blocks of 4 nodes on a graph; {limit}")
+
+
+def coding_nodes(graph: Graph, k: int) -> tuple[np.ndarray, int]:
+    """``(nodes of colour class k, number of codings)``; ValueError naming the range."""
+    classes = graph.colour_classes()
+    if k >= len(classes):
+        raise ValueError(f"coding must be in [0, {len(classes) - 1}] (the graph has "
+                         f"{len(classes)} codings); got {k}")
+    return classes[k], len(classes)
 
 
 def jsonable(value: Any) -> Any:

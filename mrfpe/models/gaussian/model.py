@@ -22,7 +22,7 @@ from mrfpe.models.gaussian.options import ESTIMATOR_OPTIONS, make_blocks
 from mrfpe.models.gaussian.pseudolikelihood import GaussianBlockTarget, GaussianPLTarget
 from mrfpe.models.gaussian.structure import CARStructure
 from mrfpe.models.graph import Graph, LatticeSpec, as_graph_spec
-from mrfpe.models.options import jsonable
+from mrfpe.models.options import coding_nodes, jsonable
 from mrfpe.targets.base import Target
 from mrfpe.validation import check_bool, check_choice, check_positive_int, check_seed
 
@@ -250,11 +250,7 @@ class GaussianMRF(Model):
             self.param_names(), options["bounds"], "bounds")
         common = {"model": self, "structure": st, "x": x, "Z": Z, "estimator": estimator}
         if estimator == "coding":
-            classes = st.graph.colour_classes()
-            k = options["coding"]
-            if k >= len(classes):
-                raise ValueError(f"coding must be in [0, {len(classes) - 1}] (the graph has "
-                                 f"{len(classes)} codings); got {k}")
+            nodes, n_codings = coding_nodes(st.graph, options["coding"])
         if estimator == "block":
             blocks = make_blocks(st.graph, options["block"])
         if st.needs_factorisation():
@@ -263,8 +259,9 @@ class GaussianMRF(Model):
         if estimator == "pl":
             return GaussianPLTarget(**common)
         if estimator == "coding":
-            return GaussianPLTarget(nodes=classes[k], cost=classes[k].size / st.n,
-                                    extra={"coding": k, "n_codings": len(classes)}, **common)
+            return GaussianPLTarget(nodes=nodes, cost=nodes.size / st.n,
+                                    extra={"coding": options["coding"],
+                                           "n_codings": n_codings}, **common)
         if estimator == "block":
             return GaussianBlockTarget(blocks=blocks, extra={
                 "block": jsonable(options["block"]), "n_blocks": len(blocks)}, **common)

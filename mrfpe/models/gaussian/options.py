@@ -15,7 +15,7 @@ import numpy as np
 
 from mrfpe.models.discrete import ESTIMATOR_OPTIONS as DISCRETE_OPTIONS
 from mrfpe.models.graph import Graph
-from mrfpe.models.options import COMMON_OPTIONS, block_option, node_blocks, nonneg_int
+from mrfpe.models.options import CODING_OPTION, COMMON_OPTIONS, block_option_spec, node_blocks
 from mrfpe.targets.options import Option, choice_check
 
 __all__ = ["COMMON", "ESTIMATOR_OPTIONS", "MAX_BLOCK_NODES", "make_blocks"]
@@ -27,14 +27,8 @@ COMMON = COMMON_OPTIONS
 
 ESTIMATOR_OPTIONS: dict[str, tuple[Option, ...]] = {
     "pl": COMMON,
-    "coding": (*COMMON, Option("coding", "int >= 0", 0, nonneg_int,
-                               "which colour class (Besag coding) 0 .. n_codings - 1")),
-    "block": (*COMMON, Option("block", "(bh, bw) | int | labels | list of arrays | None", None,
-                              block_option,
-                              "tiles (bh, bw) anchored at the top-left corner on a lattice; a "
-                              "node partition on a general graph (blocks of <= "
-                              f"{MAX_BLOCK_NODES} nodes); default (2, 2) tiles on a lattice, "
-                              "runs of 4 node ids on a graph")),
+    "coding": (*COMMON, CODING_OPTION),
+    "block": (*COMMON, block_option_spec(f"blocks of at most {MAX_BLOCK_NODES} nodes")),
     "exact": (*COMMON, Option("method", "'auto' | 'eigen' | 'sparse'", "auto",
                               choice_check("auto", "eigen", "sparse"),
                               "log det Q from the known spectrum or a sparse LU per theta")),

@@ -99,7 +99,9 @@ class Exchange(Sampler):
     ----------
     n_steps, n_chains, burn_in, thin, proposal_sd, adapt, target_acceptance
         As :class:`mrfpe.samplers.mh.MetropolisHastings` (a random walk adapted
-        during burn-in only).
+        during burn-in only). The default length, 4 chains x 8000 steps, is what
+        keeps R̂ <= 1.01 on 10 x 10 Ising posteriors: at 4000 steps 13 of 80 accurate
+        runs missed it (R̂ 1.010-1.017), at 8000 R̂ was about 1.002.
     aux_sweeps : "auto" or int
         Sweeps of the auxiliary chain per draw (ignored for exact simulators);
         "auto": ``10 τ`` measured after burn-in (see the module docstring).
@@ -115,7 +117,7 @@ class Exchange(Sampler):
         "quick_config": {"n_steps": 1200, "burn_in": 300},
     }
 
-    def __init__(self, n_steps: int = 4000, n_chains: int = 4, burn_in: int = 1000,
+    def __init__(self, n_steps: int = 8000, n_chains: int = 4, burn_in: int = 1500,
                  thin: int = 1, proposal_sd: float = 0.05, adapt: bool = True,
                  target_acceptance: float = 0.3, aux_sweeps: int | str = "auto",
                  max_aux_sweeps: int = 2000, mixing_factor: float = 5.0):

@@ -21,6 +21,7 @@ flows from a seed derived from the case name and the data-set index.
 
     python docs/results/calibrated_posteriors/run.py --n-datasets 20
     python docs/results/calibrated_posteriors/run.py --refresh-adjusted   # after a library change
+    python docs/results/calibrated_posteriors/run.py --refresh-exchange --shard 0 2  # and 1 2
     python docs/results/calibrated_posteriors/report.py
 """
 
@@ -289,6 +290,32 @@ def refresh_adjusted(path: Path) -> bool:
     return True
 
 
+def exchange_method(m, x, exact: dict, theta: np.ndarray, s: list[int]) -> dict:
+    """The exchange sampler with its defaults on the ``"likelihood"`` target."""
+    lik = m.target("likelihood", x)
+    counter = SweepCounter(lik)
+    res, dt, w = timed(lambda: draws_summary(mrfpe.sample("exchange", lik, seed=s[4])))
+    return {**compare(res, exact, theta), "wall_s": dt, "warnings": w,
+            "simulation_sweeps": counter.sweeps, "simulator_calls": counter.calls}
+
+
+def refresh_exchange(path: Path) -> bool:
+    """Recompute the exchange entry of a trial file with the library as it is now."""
+    rec = json.loads(path.read_text())
+    theta = np.array(rec["theta_true"])
+    s = rec["seeds"]
+    m = models.ising()
+    x = m.simulate(theta, shape=tuple(rec["shape"]), seed=s[0], n_sweeps=rec["data_sweeps"])
+    if not math.isclose(float((2 * x - 1).mean()), rec["magnetisation"]):
+        raise RuntimeError(f"{path.name}: the data set no longer reproduces from its seed")
+    rec["methods"]["exchange"] = exchange_method(m, x, rec["exact"], theta, s)
+    rec["exchange_commit"] = library_commit()
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(rec, indent=1, default=_json_default))
+    os.replace(tmp, path)
+    return True
+
+
 def run_trial(case: str, index: int) -> dict:
     theta = np.array(CASES[case])
     s = seeds(case, index)
@@ -332,11 +359,8 @@ def run_trial(case: str, index: int) -> dict:
     meth.update(adjusted)
 
     # (iii) exchange, defaults
-    lik = m.target("likelihood", x)
-    counter = SweepCounter(lik)
-    res, dt, w = timed(lambda: draws_summary(mrfpe.sample("exchange", lik, seed=s[4])))
-    meth["exchange"] = {**compare(res, exact, theta), "wall_s": dt, "warnings": w,
-                        "simulation_sweeps": counter.sweeps, "simulator_calls": counter.calls}
+    meth["exchange"] = exchange_method(m, x, exact, theta, s)
+    rec["exchange_commit"] = library_commit()
 
     # (iv) parametric bootstrap of the MPLE
     def boot():
@@ -364,8 +388,24 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--refresh-adjusted", action="store_true",
                     help="recompute the adjusted-PL entries of existing trial files whose "
                          "adjusted_commit differs from the library's HEAD, then stop")
+    ap.add_argument("--refresh-exchange", action="store_true",
+                    help="recompute the exchange entries of existing trial files whose "
+                         "exchange_commit differs from the library's HEAD, then stop")
+    ap.add_argument("--shard", type=int, nargs=2, default=(0, 1), metavar=("K", "N"),
+                    help="with --refresh-exchange: only files K, K+N, K+2N, ... (one per core)")
     args = ap.parse_args(argv)
     TRIALS.mkdir(parents=True, exist_ok=True)
+    if args.refresh_exchange:
+        head = library_commit()
+        k, n = args.shard
+        for path in sorted(TRIALS.glob("*.json"))[k::n]:
+            if json.loads(path.read_text()).get("exchange_commit") == head:
+                continue
+            t0 = time.perf_counter()
+            refresh_exchange(path)
+            print(f"{path.name}: exchange refreshed at {head} in "
+                  f"{time.perf_counter() - t0:.1f} s", flush=True)
+        return 0
     if args.refresh_adjusted:
         head = library_commit()
         for path in sorted(TRIALS.glob("*.json")):

@@ -1,4 +1,4 @@
-"""mrfpe's performance suite (issue 6); run ``python -m benchmarks`` from the repository root.
+"""mrfpe's performance suite; run ``python -m benchmarks`` from the repository root.
 
 Suites (``--only`` picks some):
 

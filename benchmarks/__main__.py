@@ -2,7 +2,7 @@
 
 Usage (from the repository root)::
 
-    python -m benchmarks                       # every suite at the issue's sizes (~40 min)
+    python -m benchmarks                       # every suite at full size (~40 min)
     python -m benchmarks --only targets        # one suite
     python -m benchmarks --only kernel         # lean vs classic kernel, ratios in one run
     python -m benchmarks --quick --no-write    # small scenes: a smoke run in about a minute
@@ -57,7 +57,7 @@ def _stereo(quick: bool) -> tuple[str, list[str]]:
 
 
 def _kernel(quick: bool) -> tuple[str, list[str]]:
-    return "lean vs classic kernel (issue 14)", bench_kernel.run(quick)
+    return "lean vs classic kernel", bench_kernel.run(quick)
 
 
 def _models(quick: bool) -> tuple[str, list[str]]:

@@ -1,6 +1,6 @@
 """Accuracy of every sampler's *default* configuration on Gaussians in the unit cube.
 
-A measurement script for issue 12 (run from the repository root; the table goes to
+A measurement script (run from the repository root; the table goes to
 stdout). Targets: :func:`mrfpe.testing.box_gaussian`.
 
     python benchmarks/bench_accuracy.py                 # every sampler, 3-D, 3 seeds

@@ -1,4 +1,4 @@
-"""Lean against classic kernel in one process (issue 14): ns/eval, speed of light, PMC, LM, growth.
+"""Lean against classic kernel in one process: ns/eval, speed of light, PMC, LM, growth.
 
 Everything is a **ratio in one run**: each comparison alternates the two
 kernels (``mrfpe.targets.dispatch.use_kernel``) and takes medians of several
@@ -336,7 +336,7 @@ def main(argv=None) -> int:
     info = machine()
     body = run(args.quick, tuple(args.parts))
     if not args.no_write:
-        append_results("bench_kernel: lean vs classic (issue 14)" + (" (quick)" if args.quick
+        append_results("bench_kernel: lean vs classic" + (" (quick)" if args.quick
                                                                     else ""),
                        command_line(argv, "benchmarks.bench_kernel"), info, body)
     return 0

@@ -1,6 +1,6 @@
 """PMC on synthetic Ward scenes: MAP distance to the PL maximiser and to the truth.
 
-The issue-3 acceptance measurement. For each of ``--scenes`` scenes
+The acceptance measurement of PMC. For each of ``--scenes`` scenes
 ``make_scene(brdf="ward", shape=(100, 100), n_labels=20)`` with random true
 parameters (unit cube, uniform in [0.05, 0.95]^3), build the ``pls`` target,
 find its global maximiser with :func:`mrfpe.targets.maximise`, run PMC

@@ -1,4 +1,4 @@
-"""Construction and log_prob cost of the ``pls`` target (issue 2 "Measure and report", issue 6).
+"""Construction and log_prob cost of the ``pls`` target.
 
 For a ``--shape`` (default 100 x 100) synthetic scene with 10, 20, 30 and 40
 labels it measures, per BRDF model:
@@ -16,7 +16,7 @@ labels it measures, per BRDF model:
 * a comparison kernel: the bare minimum loop doing the same number of Ward
   evaluations (same features, same vectorised exp) and one log-sum-exp per
   (node, particle) over the labels, with no data-term structure -- how close
-  ``log_prob`` is to what this machine can do (issue 6 item 3);
+  ``log_prob`` is to what this machine can do;
 * optionally (``--pmc``) the wall time of PMC 1000 x 20 beside the thesis's
   Table 8.12 (4 min at 10 labels ... 16 min at 40), its growth with the labels
   (least-squares line), and the run's peak memory (traced and process RSS).

@@ -48,8 +48,8 @@ from mrfpe.models.mixing import autocorrelation_time
 from mrfpe.targets.base import Target, as_theta_batch
 from mrfpe.targets.maximise import maximise
 
-__all__ = ["AdjustedPL", "Draws", "fisher_information", "mcmc_mle", "parametric_bootstrap",
-           "simulate_draws"]
+__all__ = ["AdjustedPL", "Draws", "fisher_information", "hessian", "mcmc_mle",
+           "parametric_bootstrap", "simulate_draws"]
 
 
 @dataclass(frozen=True)
@@ -104,16 +104,11 @@ def _log_f_of(lik: Any, y: np.ndarray) -> Any:
     return lambda theta: np.stack([lik.unnormalised(theta, yk[None]) for yk in y], axis=1)
 
 
-def _log_f(lik: Any, theta: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """``log f(y_k | θ_j)`` (N, K) for a batch of θ and draws of one configuration each."""
-    return _log_f_of(lik, y)(theta)
-
-
 def _scores(lik: Any, theta: np.ndarray, y: np.ndarray, h: np.ndarray) -> np.ndarray:
     """``∇_θ log f(y_k | θ)`` (K, d) by central differences (exact for log-linear models)."""
     d = theta.size
     steps = np.concatenate([theta + np.diag(h), theta - np.diag(h)])
-    lf = _log_f(lik, steps, y)  # (2d, K)
+    lf = _log_f_of(lik, y)(steps)  # (2d, K)
     return ((lf[:d] - lf[d:]) / (2 * h)[:, None]).T
 
 
@@ -212,7 +207,7 @@ def mcmc_mle(lik: Any, theta0: Any, *, n_draws: int = 1000, max_iter: int = 10,
     return MLEResult(theta, cov, it, sims, converged, draws)
 
 
-def _hessian(f: Any, theta: np.ndarray, h: np.ndarray) -> np.ndarray:
+def hessian(f: Any, theta: np.ndarray, h: np.ndarray) -> np.ndarray:
     """Central-difference Hessian of a batched scalar function at ``theta``."""
     d = theta.size
     E = np.diag(h)
@@ -279,7 +274,7 @@ class AdjustedPL(Target):
         b = self.bounds
         # a grid of at most ~4096 points whatever the dimension, then the local polish
         theta_pl, _ = maximise(pl, grid=max(3, int(4096 ** (1 / b.shape[0]))), seed=seed)
-        H = -_hessian(pl._log_prob, theta_pl, _step(pl, theta_pl))
+        H = -hessian(pl._log_prob, theta_pl, _step(pl, theta_pl))
         if not np.all(np.isfinite(H)):
             raise ValueError(f"the PL's Hessian at the MPLE {theta_pl.round(4).tolist()} is not "
                              f"finite: the MPLE is at the edge of the model's valid region")

@@ -338,11 +338,6 @@ def _all_configurations(q: int, m: int) -> np.ndarray:
     return np.stack(np.unravel_index(np.arange(q ** m), (q,) * m), axis=1).astype(np.int64)
 
 
-def enumerate_configurations(q: int, m: int) -> np.ndarray:
-    """Public alias of the joint-state enumeration (tests, exact likelihoods)."""
-    return _all_configurations(q, m)
-
-
 def check_configurations(x: Any, n_states: int, graph_shape: tuple[int, ...],
                          name: str = "data") -> np.ndarray:
     """Validate observed states: ``graph_shape`` or ``(M, *graph_shape)`` ints in ``[0, q)``.

@@ -9,9 +9,9 @@ import pytest
 from mrfpe import models
 from mrfpe.models.calibration import (
     AdjustedPL,
-    _hessian,
     _step,
     fisher_information,
+    hessian,
     mcmc_mle,
     parametric_bootstrap,
     simulate_draws,
@@ -29,7 +29,7 @@ def ising():
 def test_fisher_information_is_the_hessian_of_log_z(ising):
     _m, _x, exact, lik, _ = ising
     th = np.array([0.3, 0.1])
-    want = _hessian(exact.log_partition, th, _step(exact))
+    want = hessian(exact.log_partition, th, _step(exact))
     got = fisher_information(lik, simulate_draws(lik, th, 3000, seed=0))
     np.testing.assert_allclose(got, want, rtol=0.15, atol=0.05 * np.abs(want).max())
 
@@ -48,7 +48,7 @@ def test_adjusted_pl_peaks_at_the_mle_with_the_fisher_curvature(ising):
     assert isinstance(adj, AdjustedPL)
     top, _ = maximise(adj)
     np.testing.assert_allclose(top, adj.theta_ml, atol=2e-3)
-    H = -_hessian(adj._log_prob, adj.theta_ml, _step(adj))
+    H = -hessian(adj._log_prob, adj.theta_ml, _step(adj))
     np.testing.assert_allclose(H, adj.fisher_information, rtol=0.02,
                                atol=0.02 * np.abs(H).max())
     assert adj.log_prob(adj.theta_ml)[0] == pytest.approx(0.0, abs=1e-9)

@@ -42,7 +42,7 @@ import numpy as np
 
 import mrfpe
 from mrfpe import models
-from mrfpe.models.calibration import parametric_bootstrap
+from mrfpe.models.calibration import hessian, parametric_bootstrap
 from mrfpe.targets import maximise
 
 HERE = Path(__file__).resolve().parent
@@ -74,23 +74,8 @@ def seeds(case: str, index: int, n: int = 8) -> list[int]:
 def hessian_sd(target, theta: np.ndarray) -> np.ndarray:
     """Posterior sd from the central-difference Hessian of log_prob at its mode."""
     b = np.asarray(target.bounds, dtype=np.float64)
-    h = 1e-3 * (b[:, 1] - b[:, 0])
-    d = theta.size
-    pts = [theta]
-    for i in range(d):
-        for j in range(d):
-            for si, sj in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
-                pts.append(theta + si * h[i] * np.eye(d)[i] + sj * h[j] * np.eye(d)[j])
-    v = target.log_prob(np.array(pts))
-    H = np.empty((d, d))
-    k = 1
-    for i in range(d):
-        for j in range(d):
-            a, b_, c, e = v[k:k + 4]
-            H[i, j] = (a - b_ - c + e) / (4 * h[i] * h[j])
-            k += 4
-    cov = np.linalg.inv(-0.5 * (H + H.T))
-    return np.sqrt(np.diag(cov))
+    H = hessian(target.log_prob, theta, 1e-3 * (b[:, 1] - b[:, 0]))
+    return np.sqrt(np.diag(np.linalg.inv(-H)))
 
 
 def grid_posterior(target, centre: np.ndarray, sd: np.ndarray, *, n: int = GRID,
@@ -272,8 +257,8 @@ def library_commit() -> str:
     return head + ("+dirty" if dirty else "")
 
 
-def refresh_adjusted(path: Path) -> bool:
-    """Recompute the adjusted-PL entries of a trial file with the library as it is now."""
+def regenerate(path: Path) -> tuple[dict, object, np.ndarray, np.ndarray, list[int]]:
+    """A trial file's record, model, data set (regenerated from its seed and checked), θ, seeds."""
     rec = json.loads(path.read_text())
     theta = np.array(rec["theta_true"])
     s = rec["seeds"]
@@ -281,12 +266,23 @@ def refresh_adjusted(path: Path) -> bool:
     x = m.simulate(theta, shape=tuple(rec["shape"]), seed=s[0], n_sweeps=rec["data_sweeps"])
     if not math.isclose(float((2 * x - 1).mean()), rec["magnetisation"]):
         raise RuntimeError(f"{path.name}: the data set no longer reproduces from its seed")
-    new = adjusted_methods(m, x, rec["exact"], theta, s)
-    rec["adjusted_commit"] = new.pop("adjusted_commit")
-    rec["methods"].update(new)
+    return rec, m, x, theta, s
+
+
+def write_trial(rec: dict, path: Path) -> None:
+    """Write a trial record atomically (a temporary file, then a rename)."""
     tmp = path.with_suffix(".tmp")
     tmp.write_text(json.dumps(rec, indent=1, default=_json_default))
     os.replace(tmp, path)
+
+
+def refresh_adjusted(path: Path) -> bool:
+    """Recompute the adjusted-PL entries of a trial file with the library as it is now."""
+    rec, m, x, theta, s = regenerate(path)
+    new = adjusted_methods(m, x, rec["exact"], theta, s)
+    rec["adjusted_commit"] = new.pop("adjusted_commit")
+    rec["methods"].update(new)
+    write_trial(rec, path)
     return True
 
 
@@ -301,18 +297,10 @@ def exchange_method(m, x, exact: dict, theta: np.ndarray, s: list[int]) -> dict:
 
 def refresh_exchange(path: Path) -> bool:
     """Recompute the exchange entry of a trial file with the library as it is now."""
-    rec = json.loads(path.read_text())
-    theta = np.array(rec["theta_true"])
-    s = rec["seeds"]
-    m = models.ising()
-    x = m.simulate(theta, shape=tuple(rec["shape"]), seed=s[0], n_sweeps=rec["data_sweeps"])
-    if not math.isclose(float((2 * x - 1).mean()), rec["magnetisation"]):
-        raise RuntimeError(f"{path.name}: the data set no longer reproduces from its seed")
+    rec, m, x, theta, s = regenerate(path)
     rec["methods"]["exchange"] = exchange_method(m, x, rec["exact"], theta, s)
     rec["exchange_commit"] = library_commit()
-    tmp = path.with_suffix(".tmp")
-    tmp.write_text(json.dumps(rec, indent=1, default=_json_default))
-    os.replace(tmp, path)
+    write_trial(rec, path)
     return True
 
 
@@ -423,9 +411,7 @@ def main(argv: list[str] | None = None) -> int:
             if path.exists():
                 continue
             rec = run_trial(case, index)
-            tmp = path.with_suffix(".tmp")
-            tmp.write_text(json.dumps(rec, indent=1, default=_json_default))
-            os.replace(tmp, path)
+            write_trial(rec, path)
             ex = rec["methods"]["exchange"]
             print(f"{case} #{index}: {rec['wall_s']:.1f} s; exchange z "
                   f"{np.round(ex.get('z', [math.nan] * 2), 2).tolist()} ratio "

@@ -32,11 +32,11 @@ from mrfpe.models.graph import Graph, LatticeSpec, as_graph_spec
 from mrfpe.models.options import (
     CODING_OPTION,
     COMMON_OPTIONS,
+    PL_ADJUSTED_OPTIONS,
     block_option_spec,
     bounds_option,
     coding_nodes,
     jsonable,
-    nonneg_int,
 )
 from mrfpe.models.terms import EdgeCovariate, Term
 from mrfpe.targets.base import Target
@@ -82,18 +82,7 @@ ESTIMATOR_OPTIONS: dict[str, tuple[Option, ...]] = {
     "exact": (*COMMON, Option("method", "'auto' | 'enumerate' | 'eliminate'", "auto",
                               choice_check("auto", "enumerate", "eliminate"),
                               "log Z by enumeration (tiny) or variable elimination")),
-    "pl_adjusted": (*COMMON,
-                    Option("mode", "'mcmc_mle' | 'mple'", "mcmc_mle",
-                           choice_check("mcmc_mle", "mple"),
-                           "centre at the Monte Carlo MLE, or at the MPLE (curvature only)"),
-                    Option("align", "'mode' | 'moments'", "moments",
-                           choice_check("mode", "moments"),
-                           "match mode and Hessian, or mean and covariance, to N(MLE, I^-1)"),
-                    Option("n_draws", "int >= 10", 1000,
-                           lambda n, v: check_positive_int(n, v, minimum=10),
-                           "simulations per Fisher information / MCMC-MLE round"),
-                    Option("seed", "int >= 0", 0, nonneg_int,
-                           "seed of every simulation of the calibration")),
+    "pl_adjusted": (*COMMON, *PL_ADJUSTED_OPTIONS),
     "likelihood": (*COMMON, Option("sampler", "'auto' | 'gibbs' | 'swendsen_wang'", "auto",
                                    choice_check("auto", "gibbs", "swendsen_wang"),
                                    "the simulator used for auxiliary draws"),

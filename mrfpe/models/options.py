@@ -14,12 +14,12 @@ from typing import Any
 import numpy as np
 
 from mrfpe.models.graph import Graph
-from mrfpe.targets.options import Option, optional
+from mrfpe.targets.options import Option, choice_check, optional
 from mrfpe.validation import check_positive_int
 
-__all__ = ["CODING_OPTION", "COMMON_OPTIONS", "block_option", "block_option_spec",
-           "bounds_option", "coding_nodes", "covariates_option", "jsonable", "node_blocks",
-           "nonneg_int"]
+__all__ = ["CODING_OPTION", "COMMON_OPTIONS", "PL_ADJUSTED_OPTIONS", "block_option",
+           "block_option_spec", "bounds_option", "coding_nodes", "covariates_option", "jsonable",
+           "node_blocks", "nonneg_int"]
 
 
 def covariates_option(name: str, value: Any) -> Any:
@@ -86,6 +86,17 @@ COMMON_OPTIONS: tuple[Option, ...] = (
            optional(bounds_option), "sampling-space bounds of theta (default: the model's)"),
 )
 
+
+#: What ``"pl_adjusted"`` (:class:`mrfpe.models.calibration.AdjustedPL`) takes, every model.
+PL_ADJUSTED_OPTIONS: tuple[Option, ...] = (
+    Option("mode", "'mcmc_mle' | 'mple'", "mcmc_mle", choice_check("mcmc_mle", "mple"),
+           "centre at the Monte Carlo MLE, or at the MPLE (curvature only)"),
+    Option("align", "'mode' | 'moments'", "moments", choice_check("mode", "moments"),
+           "match mode and Hessian, or mean and covariance, to N(MLE, I^-1)"),
+    Option("n_draws", "int >= 10", 1000, lambda n, v: check_positive_int(n, v, minimum=10),
+           "simulations per Fisher information / MCMC-MLE round"),
+    Option("seed", "int >= 0", 0, nonneg_int, "seed of every simulation of the calibration"),
+)
 
 #: ``coding=k``: which of the graph's colour classes a coding estimator sums.
 CODING_OPTION = Option("coding", "int >= 0", 0, nonneg_int,

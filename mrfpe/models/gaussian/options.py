@@ -13,9 +13,14 @@ from typing import Any
 
 import numpy as np
 
-from mrfpe.models.discrete import ESTIMATOR_OPTIONS as DISCRETE_OPTIONS
 from mrfpe.models.graph import Graph
-from mrfpe.models.options import CODING_OPTION, COMMON_OPTIONS, block_option_spec, node_blocks
+from mrfpe.models.options import (
+    CODING_OPTION,
+    COMMON_OPTIONS,
+    PL_ADJUSTED_OPTIONS,
+    block_option_spec,
+    node_blocks,
+)
 from mrfpe.targets.options import Option, choice_check
 
 __all__ = ["COMMON", "ESTIMATOR_OPTIONS", "MAX_BLOCK_NODES", "make_blocks"]
@@ -35,7 +40,7 @@ ESTIMATOR_OPTIONS: dict[str, tuple[Option, ...]] = {
     "likelihood": (*COMMON, Option("sampler", "'auto' | 'fft' | 'dense' | 'sparse'", "auto",
                                    choice_check("auto", "fft", "dense", "sparse"),
                                    "the exact simulator used for auxiliary draws")),
-    "pl_adjusted": (*COMMON, *DISCRETE_OPTIONS["pl_adjusted"][len(DISCRETE_OPTIONS["pl"]):]),
+    "pl_adjusted": (*COMMON, *PL_ADJUSTED_OPTIONS),
 }
 
 

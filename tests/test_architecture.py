@@ -1,13 +1,22 @@
-"""The import graph of mrfpe: no circles, and the leaf modules stay leaves (issue 11).
+"""The architecture rules of mrfpe (docs/architecture.md), checked on the source tree.
 
-The graph comes from grimp (the import-linter project's graph builder), which
-reads every import statement, including those inside functions; imports under
-``if TYPE_CHECKING:`` are left out (they never run).
+Imports: the graph comes from grimp (the import-linter project's graph builder),
+which reads every import statement, including those inside functions; imports
+under ``if TYPE_CHECKING:`` are left out (they never run). No circles, leaves
+stay leaves, nothing imports the package root, no private name crosses a
+subpackage boundary.
+
+Size and state: no module over 450 lines, no function over 80 lines (numba
+kernels excepted: their loops are written out for the compiler), no
+``object.__setattr__`` (frozen means frozen) and no ``global`` statement (no
+process-wide mutable switch).
 """
 
 from __future__ import annotations
 
+import ast
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -101,3 +110,140 @@ def test_near_leaves_import_leaves_only(graph, module):
 def test_library_never_imports_the_cli(graph):
     users = {m for m in graph.modules if "mrfpe.cli" in _edges(graph, m)}
     assert users <= {"mrfpe.__main__"}
+
+
+# -- source-level rules ----------------------------------------------------------------
+
+ROOT = Path(__file__).resolve().parents[1]
+#: Library sources the rules hold for: the package and the plugins shipped beside it.
+SOURCES = sorted([*(ROOT / "mrfpe").rglob("*.py"), *(ROOT / "plugins").glob("*/*/*.py")])
+MAX_MODULE_LINES = 450
+MAX_FUNCTION_LINES = 80
+#: Decorators that mark a compiled kernel (exempt from the function-length rule).
+KERNEL_DECORATORS = ("njit", "jit", "vectorize", "guvectorize", "stencil")
+
+
+def _rel(path: Path) -> str:
+    return path.relative_to(ROOT).as_posix()
+
+
+def _tree(path: Path) -> ast.Module:
+    return ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+
+
+def _module_name(path: Path) -> str:
+    """Dotted module name of a source file (plugins: relative to their project folder)."""
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    if parts[0] == "plugins":
+        parts = parts[2:]
+    if parts[-1] == "__init__":
+        parts = parts[:-1]
+    return ".".join(parts)
+
+
+def _is_kernel(fn: ast.FunctionDef | ast.AsyncFunctionDef) -> bool:
+    for deco in fn.decorator_list:
+        target = deco.func if isinstance(deco, ast.Call) else deco
+        name = target.attr if isinstance(target, ast.Attribute) else getattr(target, "id", "")
+        if name in KERNEL_DECORATORS:
+            return True
+    return False
+
+
+def long_functions(tree: ast.Module) -> list[tuple[str, int]]:
+    """(name, lines) of every function or method over the limit that is not a kernel."""
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef) and not _is_kernel(node):
+            lines = node.end_lineno - node.lineno + 1
+            if lines > MAX_FUNCTION_LINES:
+                found.append((node.name, lines))
+    return found
+
+
+def frozen_escapes(tree: ast.Module) -> list[int]:
+    """Line numbers of ``object.__setattr__`` calls and ``global`` statements."""
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Global):
+            found.append(node.lineno)
+        elif (isinstance(node, ast.Attribute) and node.attr == "__setattr__"
+              and isinstance(node.value, ast.Name) and node.value.id == "object"):
+            found.append(node.lineno)
+    return found
+
+
+def _subpackage(module: str) -> str:
+    """First-level subpackage of a module (``mrfpe.targets.lean`` -> ``mrfpe.targets``);
+    top-level modules (``mrfpe.scene``) belong to ``mrfpe``, a plugin to itself."""
+    parts = module.split(".")
+    if parts[0] == "mrfpe" and len(parts) > 1 and (ROOT / "mrfpe" / parts[1]).is_dir():
+        return ".".join(parts[:2])
+    return parts[0]
+
+
+def private_imports(tree: ast.Module, module: str, is_package: bool) -> list[str]:
+    """``from X import _name`` where X is an mrfpe module of another subpackage."""
+    found = []
+    for node in ast.walk(tree):
+        if not isinstance(node, ast.ImportFrom):
+            continue
+        if node.level:
+            base = module.split(".")[: len(module.split(".")) - node.level + is_package]
+            source = ".".join(base + ([node.module] if node.module else []))
+        else:
+            source = node.module or ""
+        if not source.startswith("mrfpe"):
+            continue
+        for alias in node.names:
+            private = alias.name.startswith("_") and not alias.name.startswith("__")
+            if private and _subpackage(source) != _subpackage(module):
+                found.append(f"{source}.{alias.name}")
+    return found
+
+
+@pytest.mark.parametrize("path", SOURCES, ids=_rel)
+def test_module_is_short(path):
+    lines = len(path.read_text(encoding="utf-8").splitlines())
+    assert lines <= MAX_MODULE_LINES, f"{_rel(path)} has {lines} lines: split it by idea"
+
+
+@pytest.mark.parametrize("path", SOURCES, ids=_rel)
+def test_functions_are_short(path):
+    assert long_functions(_tree(path)) == [], f"{_rel(path)}: split these into steps"
+
+
+@pytest.mark.parametrize("path", SOURCES, ids=_rel)
+def test_no_frozen_escape_or_global_state(path):
+    assert frozen_escapes(_tree(path)) == [], f"{_rel(path)}: object.__setattr__ or global"
+
+
+@pytest.mark.parametrize("path", SOURCES, ids=_rel)
+def test_no_private_name_crosses_a_subpackage(path):
+    module = _module_name(path)
+    assert private_imports(_tree(path), module, path.name == "__init__.py") == []
+
+
+#: Applications built on the library: they may use the package root's front door
+#: (``mrfpe.sample``, ``mrfpe.distance``); the library's layers never import it.
+APPLICATIONS = ("mrfpe.__main__", "mrfpe.cli", "mrfpe.demo", "mrfpe.studies")
+
+
+def test_only_applications_import_the_package_root(graph):
+    users = {m for m in graph.modules if "mrfpe" in graph.find_modules_directly_imported_by(m)}
+    assert {m for m in users if not m.startswith(APPLICATIONS)} == set()
+
+
+def test_source_rules_see_violations():
+    """The checkers themselves, on a small source with one of each violation."""
+    src = ast.parse(
+        "from mrfpe.targets.kernels import _FM\n"
+        "from .lean import _inner\n"
+        "import numba\n"
+        "def long():\n" + "    x = 1\n" * 85 +
+        "@numba.njit(cache=True)\ndef kernel():\n" + "    x = 1\n" * 85 +
+        "def sneaky(self):\n    global STATE\n    object.__setattr__(self, 'a', 1)\n")
+    assert long_functions(src) == [("long", 86)]
+    assert frozen_escapes(src) == [src.body[-1].body[0].lineno, src.body[-1].body[1].lineno]
+    assert private_imports(src, "mrfpe.mixture", False) == ["mrfpe.targets.kernels._FM"]
+    assert private_imports(src, "mrfpe.targets.jacobian", False) == []

@@ -63,12 +63,10 @@ import numpy as np
 
 from mrfpe.samplers.base import Callback, Sampler, check_choice, check_positive_int, check_range
 from mrfpe.samplers.kit import (
-    KeptStates,
-    Run,
     check_chain_length,
-    check_seed,
-    check_target,
-    draw_in_support,
+    evaluate_inside,
+    random_walk_proposal,
+    start_chains,
 )
 
 __all__ = ["QTypeDynamicWeighting", "RTypeDynamicWeighting", "dw_update",
@@ -180,25 +178,16 @@ class _DynamicWeighting(Sampler):
     def run(self, target: Any, *, seed: int | None, progress: bool = False,
             callback: Callback | None = None):
         """Run the weighted chain(s) on ``target`` and return the posterior Dataset."""
-        bounds = check_target(target)
-        check_seed(seed)
-        rng = np.random.default_rng(seed)
-        n, c, d = self.n_steps, self.n_chains, bounds.shape[0]
-        lo, hi = bounds[:, 0], bounds[:, 1]
-        sd = self.proposal_sd * (hi - lo)
-        run = Run(target, n, progress=progress, callback=callback, desc=self.name,
-                  rows=n + c * (n // self.thin + self.burn_in + 4))
-
-        x, lp = draw_in_support(run, target, rng, c, bounds)
+        n, c = self.n_steps, self.n_chains
+        bounds, rng, run, x, lp, kept = start_chains(
+            target, seed, n_steps=n, n_chains=c, burn_in=self.burn_in, thin=self.thin,
+            desc=self.name, progress=progress, callback=callback, weighted=True)
+        sd = self.proposal_sd * (bounds[:, 1] - bounds[:, 0])  # T(x, ·) of 5.47, fixed
         log_pi = self._initial_log_weight(lp)
         acceptance = np.zeros(n)
-        kept = KeptStates(n, self.burn_in, self.thin, c, d, weighted=True)
         for t in range(n):
-            y = x + sd * rng.standard_normal((c, d))
-            inside = np.all((y >= lo) & (y <= hi), axis=1)
-            lpy = np.full(c, -np.inf)
-            if inside.any():
-                lpy[inside] = run.evaluate(target, y[inside])
+            y, inside = random_walk_proposal(x, sd, bounds, rng)
+            lpy = evaluate_inside(run, target, y, inside)  # -inf outside, not evaluated
             log_u = np.log(rng.random(c))
             log_v = np.log(rng.uniform(1 - self.delta, 1 + self.delta, c)) if self.delta else 0.0
             found = np.isfinite(lp)

@@ -49,14 +49,12 @@ from mrfpe.models.mixing import autocorrelation_time
 from mrfpe.samplers.base import Callback, Sampler, check_positive_int, check_range
 from mrfpe.samplers.kit import (
     AdaptiveRandomWalk,
-    KeptStates,
-    Run,
     check_bool,
     check_chain_length,
-    check_seed,
     check_target,
-    draw_in_support,
+    evaluate_inside,
     metropolis_accept,
+    start_chains,
 )
 
 __all__ = ["Exchange", "check_likelihood_target", "kde_mode"]
@@ -138,26 +136,21 @@ class Exchange(Sampler):
     def run(self, target: Any, *, seed: int | None, progress: bool = False,
             callback: Callback | None = None):
         """Run the chains on a likelihood ``target``; return the posterior Dataset."""
-        bounds = check_target(target)
+        check_target(target)
         check_likelihood_target(target)
-        check_seed(seed)
-        rng = np.random.default_rng(seed)
-        n, c, d = self.n_steps, self.n_chains, bounds.shape[0]
+        n, c = self.n_steps, self.n_chains
         exact = bool(getattr(target, "exact_simulator", False))
         sweeps = self._initial_sweeps(target)
-        run = Run(target, n, progress=progress, callback=callback, desc=self.name,
-                  rows=n + c * (n // self.thin + self.burn_in + 4))
-        x, lp = draw_in_support(run, target, rng, c, bounds)
+        bounds, rng, run, x, lp, kept = start_chains(
+            target, seed, n_steps=n, n_chains=c, burn_in=self.burn_in, thin=self.thin,
+            desc=self.name, progress=progress, callback=callback)
         walk = AdaptiveRandomWalk(bounds, c, self.proposal_sd, self.burn_in, self.adapt,
                                   self.target_acceptance)
         acceptance = np.zeros(n)
-        kept = KeptStates(n, self.burn_in, self.thin, c, d)
         tau_burn = math.nan
         for t in range(n):
             y, inside = walk.propose(x, rng)
-            lpy = np.full(c, -np.inf)
-            if inside.any():
-                lpy[inside] = run.evaluate(target, y[inside])
+            lpy = evaluate_inside(run, target, y, inside)  # -inf outside, not evaluated
             log_ratio = np.full(c, -np.inf)
             for i in np.flatnonzero(inside & np.isfinite(lpy)):
                 aux = target.simulate(y[i], seed=int(rng.integers(2**63)), **(

@@ -27,14 +27,11 @@ import numpy as np
 from mrfpe.samplers.base import Callback, Sampler, check_positive_int, check_range
 from mrfpe.samplers.kit import (
     AdaptiveRandomWalk,
-    KeptStates,
-    Run,
     check_bool,
     check_chain_length,
-    check_seed,
-    check_target,
-    draw_in_support,
+    evaluate_inside,
     metropolis_accept,
+    start_chains,
 )
 
 __all__ = ["MetropolisHastings", "metropolis_accept"]  # the accept rule lives in the kit
@@ -80,24 +77,17 @@ class MetropolisHastings(Sampler):
     def run(self, target: Any, *, seed: int | None, progress: bool = False,
             callback: Callback | None = None):
         """Run the chains on ``target`` and return the posterior Dataset."""
-        bounds = check_target(target)
-        check_seed(seed)
-        rng = np.random.default_rng(seed)
-        n, c, d = self.n_steps, self.n_chains, bounds.shape[0]
-        run = Run(target, n, progress=progress, callback=callback, desc=self.name,
-                  rows=n + c * (n // self.thin + self.burn_in + 4))
-
-        x, lp = draw_in_support(run, target, rng, c, bounds)
+        n, c = self.n_steps, self.n_chains
+        bounds, rng, run, x, lp, kept = start_chains(
+            target, seed, n_steps=n, n_chains=c, burn_in=self.burn_in, thin=self.thin,
+            desc=self.name, progress=progress, callback=callback)
         walk = AdaptiveRandomWalk(bounds, c, self.proposal_sd, self.burn_in, self.adapt,
                                   self.target_acceptance)
         acceptance, scales = np.zeros(n), np.zeros(n)
-        kept = KeptStates(n, self.burn_in, self.thin, c, d)
         for t in range(n):
             scale = walk.scale
             y, inside = walk.propose(x, rng)
-            lpy = np.full(c, -np.inf)
-            if inside.any():
-                lpy[inside] = run.evaluate(target, y[inside])
+            lpy = evaluate_inside(run, target, y, inside)  # -inf outside, not evaluated
             accept = inside & metropolis_accept(np.log(rng.random(c)), lp, lpy)
             x[accept], lp[accept] = y[accept], lpy[accept]
             acceptance[t], scales[t] = accept.mean(), scale

@@ -71,12 +71,16 @@ normaliser is defined and none is reported.
 The MAP trace is best-so-far under the *full* target: each iteration
 evaluates the full target at its best particle under ``G^n`` (one evaluation,
 1/N per particle), and the last step offers every finally reweighted particle.
+
+The iterations are steps (:mod:`mrfpe.samplers.pmc_steps`): each variant is an
+``init``/``step`` pair over frozen :class:`~mrfpe.samplers.pmc_steps.PMCParams`
+and its own immutable state, and :meth:`PMC.run` is the driver; it changes
+nothing on the sampler object.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import Any, ClassVar, NamedTuple
+from typing import Any, ClassVar
 
 import numpy as np
 import xarray as xr
@@ -89,190 +93,26 @@ from mrfpe.samplers.kit import (
     THESIS_POWER,
     History,
     Run,
-    box_log_evidence,
     check_bool,
     check_seed,
     check_target,
-    covariance_kernel,
-    ess,
     grid,
-    jitter,
-    jitter_mixture,
-    log_box_volume,
-    log_kernel_mass,
-    log_mixture_box_mass,
-    log_mixture_density,
-    log_ratio,
-    normalise_log_weights,
-    partition_or_none,
-    resample,
-    softened,
     space_filling,
 )
+from mrfpe.samplers.pmc_steps import (
+    ALGORITHMS,
+    PMCParams,
+    StepInfo,
+    importance_functions,
+    iterate,
+    mixture_log_evidence,
+)
 
-__all__ = ["PMC", "THESIS_POWER", "Context", "PMCState", "final_log_weight", "init_state",
-           "mixture_log_evidence", "mixture_step", "thesis1_step", "thesis2_literal_step",
-           "thesis2_step"]
-
-
-class Context(NamedTuple):
-    """What a step reads but never changes: the run log, the random stream and the box."""
-
-    run: Run
-    rng: np.random.Generator
-    bounds: np.ndarray
-
-
-class PMCState(NamedTuple):
-    """The particle set after an iteration (immutable; each step returns a new one).
-
-    Attributes
-    ----------
-    x : (N, d) particles.
-    log_weight : (N,) their weights under this iteration (mixture: ``l·log G^n − log q^n``;
-        PMC (II): ``log c^n``, 6.67; PMC (I): ``log π^n``, 6.66).
-    log_den : what the full target is divided by for the final weights
-        (``log q^n``, ``log G^n``), or None for the target itself (mixture, iteration 0).
-    power : the softening power in use (mixture ``"auto"`` anneals it).
-    resampled : whether this iteration resampled (mixture with ``ess_threshold``).
-    log_target : full target at ``x`` when the step evaluated it (PMC (I)), else None.
-    x_next, log_target_next : PMC (I)'s step-3 resampled set, the next iteration's input.
-    mixture : mixture with ``kernel="covariance"``: ``(centres, log_w, chol)`` of the
-        untruncated mixture ``log_den`` is the density of (for its box mass, the evidence).
-    """
-
-    x: np.ndarray
-    log_weight: np.ndarray | None = None
-    log_den: np.ndarray | None = None
-    power: float | str = THESIS_POWER
-    resampled: bool = True
-    log_target: np.ndarray | None = None
-    x_next: np.ndarray | None = None
-    log_target_next: np.ndarray | None = None
-    mixture: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-
-
-def init_state(x: np.ndarray, power: float | str) -> PMCState:
-    """The state before iteration 0: the initial set ``x`` (the grid), nothing weighted yet."""
-    return PMCState(x=x, power=power)
-
-
-def final_log_weight(state: PMCState, log_target: np.ndarray) -> np.ndarray:
-    """The final reweighting with the full target: ``log ϱ(x) − log_den``."""
-    return log_target if state.log_den is None else log_ratio(log_target, state.log_den)
-
-
-def mixture_log_evidence(state: PMCState, log_weight: np.ndarray, bounds: np.ndarray,
-                         rng: np.random.Generator) -> dict[str, float]:
-    """``{"log_evidence": …, "log_evidence_se": …}`` (relative to the box,
-    :mod:`mrfpe.samplers.kit.evidence`) of the mixture variant's final weights
-    ``ϱ(x)/q(x)``; empty when every weight is zero (``build`` refuses the set).
-
-    ``q`` is the last jittered resample's density: exact on the box for the
-    diagonal kernels, the untruncated mixture for ``kernel="covariance"`` (its box
-    mass is estimated with ``rng``, after the run, so the draws are unchanged); with
-    a single iteration the weights are ``ϱ`` itself on the uniform start.
-    """
-    if not np.isfinite(log_weight).any():
-        return {}
-    log_vol = log_box_volume(bounds)
-    lw = log_weight + log_vol if state.log_den is None else log_weight  # U(box): q = 1/vol
-    mass, mass_se = (0.0, 0.0) if state.mixture is None else log_mixture_box_mass(
-        *state.mixture, bounds, rng)
-    lz, se = box_log_evidence(lw, bounds, mass, mass_se)
-    return {"log_evidence": lz, "log_evidence_se": se}
-
-
-# Each step maps (config, context, state, iteration n, importance function G^n) to the new
-# state and the G^n values at the new particles (for the cheap MAP candidate).
-Step = Callable[[Any, Context, PMCState, int, Any], tuple[PMCState, np.ndarray]]
-
-
-def mixture_step(pmc: PMC, ctx: Context, state: PMCState, n: int,
-                 g: Any) -> tuple[PMCState, np.ndarray]:
-    """Cappé et al.'s PMC: resample, jitter, weight ``G^n / q^n`` (deterministic mixture)."""
-    run, x = ctx.run, state.x
-    if n == 0:  # evenly spaced grid represents the uniform proposal: weight = G^0
-        raw = run.evaluate(g, x)
-        power, lw = pmc._soften(raw, 0.0, 0.0)
-        return state._replace(log_weight=lw, power=power, log_den=None), raw
-    lw_prev = state.log_weight
-    ok = pmc.ess_threshold is None or ess(lw_prev) < pmc.ess_threshold * lw_prev.size
-    idx = (resample(lw_prev, pmc.n_samples, pmc.resampling, ctx.rng) if ok
-           else np.arange(x.shape[0]))
-    mixture = None
-    if pmc.kernel == "covariance":  # full kernel, out-of-box draws take a fresh ancestor
-        chol = covariance_kernel(x, lw_prev)
-        x_new, lq = jitter_mixture(x, idx, chol, ctx.bounds, ctx.rng)
-        anc, counts = np.unique(idx, return_counts=True)
-        mixture = (x[anc], np.log(counts / idx.size), chol)
-    else:  # diagonal kernels truncated to the box, with their exact normalisers
-        anc, counts = np.unique(idx, return_counts=True)
-        sigma = pmc._kernel(n, x, lw_prev)
-        x_new = jitter(x[idx], sigma, ctx.bounds, ctx.rng)
-        log_w = np.log(counts / idx.size) - log_kernel_mass(x[anc], sigma, ctx.bounds)
-        lq = log_mixture_density(x_new, x[anc], log_w, sigma)
-    raw = run.evaluate(g, x_new)
-    power, lw = pmc._soften(raw, lq, state.power)
-    return PMCState(x=x_new, log_weight=lw, log_den=lq, power=power, resampled=bool(ok),
-                    mixture=mixture), raw
-
-
-def thesis2_step(cfg: Any, ctx: Context, state: PMCState, n: int,
-                 g: Any, *, literal: bool = False) -> tuple[PMCState, np.ndarray]:
-    """PMC (II), 6.6.2: resample with ``w = c^{n-1} G^n(a^{n-1})`` (6.67), jitter,
-    ``c^n = 1 / G^n(a^n)``.
-
-    ``literal=False`` (variant ``"thesis2"``) takes ``c^{n-1}`` as the ``1/N`` that
-    resampling returns, so ``w = G^n(a^{n-1})`` and the selections compound;
-    ``literal=True`` (``"thesis2_literal"``) as ``1/G^{n-1}(a^{n-1})``, so the set
-    keeps representing the uniform distribution (and ``k = 1`` gives ``w = 1``).
-    ``cfg`` provides ``n_samples``, ``resampling`` and ``sigma(n)`` (PMC and PPF do).
-    """
-    run, x = ctx.run, state.x
-    w = run.evaluate(g, x)  # u^0 grid weighted by G^0 (6.6.2, n = 0, step 1)
-    if n > 0 and literal:
-        w = state.log_weight + w  # 6.67 with c^{n-1} = 1/G^{n-1}(a^{n-1})
-    idx = resample(w, cfg.n_samples, cfg.resampling, ctx.rng)
-    a = jitter(x[idx], cfg.sigma(n), ctx.bounds, ctx.rng)
-    lg = run.evaluate(g, a)
-    lc = log_ratio(0.0, lg)  # c^n = 1/G^n(a^n), zero where G^n = 0
-    return state._replace(x=a, log_weight=lc, log_den=lg), lg
-
-
-def thesis2_literal_step(cfg: Any, ctx: Context, state: PMCState, n: int,
-                         g: Any) -> tuple[PMCState, np.ndarray]:
-    """PMC (II) with 6.67 read literally (:func:`thesis2_step` with ``literal=True``)."""
-    return thesis2_step(cfg, ctx, state, n, g, literal=True)
-
-
-def thesis1_step(cfg: Any, ctx: Context, state: PMCState, n: int,
-                 g: Any) -> tuple[PMCState, np.ndarray]:
-    """PMC (I), 6.6.1: ``v = π^{n-1} G^n(θ^{n-1}) / ePL(θ^{n-1})`` (6.66), resample with
-    jitter, ``π^n = ePL(θ^n) / G^n(θ^n)``, resample again (step 3)."""
-    run = ctx.run
-    x = state.x if state.x_next is None else state.x_next  # previous step-3 resampled set
-    if n == 0:  # v^0 = G^0(u^0) on the grid
-        v = run.evaluate(g, x)
-    else:  # π^{n-1} equal after resampling
-        v = log_ratio(run.evaluate(g, x), state.log_target_next)
-    idx = resample(v, cfg.n_samples, cfg.resampling, ctx.rng)
-    th = jitter(x[idx], cfg.sigma(n), ctx.bounds, ctx.rng)
-    lg = run.evaluate(g, th)
-    lt = run.evaluate(run.target, th)
-    run.offer(th, lt)
-    lpi = log_ratio(lt, lg)
-    res = resample(lpi, cfg.n_samples, cfg.resampling, ctx.rng)
-    return state._replace(x=th, log_weight=lpi, log_den=lg, log_target=lt, x_next=th[res],
-                          log_target_next=lt[res]), lg
-
+__all__ = ["PMC"]
 
 #: Initial sets: the grid of cell centres, the grid from face to face (both "evenly
 #: spaced", 6.6), a scrambled Halton design.
 INITIAL_SETS = (*GRID_READINGS, "halton")
-
-STEPS: dict[str, Step] = {"mixture": mixture_step, "thesis2": thesis2_step,
-                          "thesis2_literal": thesis2_literal_step, "thesis1": thesis1_step}
 
 
 class PMC(Sampler):
@@ -317,7 +157,7 @@ class PMC(Sampler):
                  keep_history: bool = False):
         self.n_samples = check_positive_int("n_samples", n_samples, 2)
         self.n_iterations = check_positive_int("n_iterations", n_iterations, 1)
-        self.variant = check_choice("variant", variant, tuple(STEPS))
+        self.variant = check_choice("variant", variant, tuple(ALGORITHMS))
         self.k = check_positive_int("k", k, 1)
         self.partition = check_choice("partition", partition, ("strided", "block"))
         if power is None:  # the variant's default (see the class docstring)
@@ -352,88 +192,40 @@ class PMC(Sampler):
         self.ess_threshold = ess_threshold
         self.keep_history = check_bool("keep_history", keep_history)
 
-    # -- helpers -------------------------------------------------------------
-    def _importance_functions(self, target) -> list:
-        parts = partition_or_none(target, self.k, self.partition) or [target]
-        if self.variant == "mixture":  # softened below as l · log PL^n (5.69), l fixed or auto
-            return parts
-        return [softened(p, self.power) for p in parts]
-
-    def _soften(self, log_g: np.ndarray, log_q: np.ndarray | float,
-                prev: float) -> tuple[float, np.ndarray]:
-        """Power ``l`` and log weights ``l · log G^n - log q`` (5.69–5.72).
-
-        ``power="auto"`` anneals: ``l`` is the largest value in ``[prev, 1]``
-        whose weights keep ``ESS(l) >= auto_ess · ESS(prev)`` (bisection on
-        log l), so the softening adapts to the target's scale and sharpens as
-        the cloud concentrates (adaptive tempering, as in SMC samplers).
-        """
-        def weights(l: float) -> np.ndarray:
-            return log_ratio(l * log_g, log_q)
-
-        if self.power != "auto":
-            return float(self.power), weights(float(self.power))
-        prev = max(prev, 1e-12)
-        goal = self.auto_ess * ess(weights(prev))
-        if not np.isfinite(log_g).any() or ess(weights(1.0)) >= goal:
-            return 1.0, weights(1.0)
-        lo, hi = np.log(prev), 0.0
-        if ess(weights(prev)) < goal:  # cannot happen for auto_ess <= 1; kept for safety
-            return prev, weights(prev)
-        for _ in range(40):
-            mid = 0.5 * (lo + hi)
-            lo, hi = (mid, hi) if ess(weights(np.exp(mid))) >= goal else (lo, mid)
-        return float(np.exp(lo)), weights(float(np.exp(lo)))
+    def params(self) -> PMCParams:
+        """The frozen parameters the steps read (:class:`~mrfpe.samplers.pmc_steps.PMCParams`)."""
+        return PMCParams(self.n_samples, self.n_iterations, self.sigma0, self.resampling,
+                         self.power, self.auto_ess, self.kernel, self.ess_threshold)
 
     def sigma(self, n: int) -> float:
         """The thesis's jitter schedule ``σ_n = σ₀ (1 − n/T)`` (6.6)."""
-        return self.sigma0 * (1.0 - n / self.n_iterations)
+        return self.params().sigma(n)
 
-    def _kernel(self, n: int, x: np.ndarray, lw: np.ndarray) -> float | np.ndarray:
-        """Jitter scale at iteration n: the thesis's spherical ``σ_n``, or (``"adaptive"``)
-        per parameter ``min(σ_n, h · sd_j)`` with ``sd_j`` the weighted sd of the cloud
-        and ``h = (4/((d+2) N))^{1/(d+4)}`` (Silverman's factor), so the kernel shrinks
-        in directions the target already pins down."""
-        sigma = self.sigma(n)
-        if self.kernel == "isotropic":
-            return sigma
-        w = np.exp(normalise_log_weights(lw))
-        sd = np.sqrt(np.maximum(w @ (x - w @ x) ** 2, 0.0))
-        d = x.shape[1]
-        h = (4.0 / ((d + 2) * x.shape[0])) ** (1.0 / (d + 4))
-        return np.clip(h * sd, 1e-6 * sigma, sigma)
-
-    # -- run -----------------------------------------------------------------
     def run(self, target: Any, *, seed: int | None = None, progress: bool = False,
             callback: Callback | None = None) -> xr.Dataset:
         """Sample ``target``; returns the posterior Dataset (DESIGN.md)."""
         bounds = check_target(target)
         check_seed(seed)
-        G = self._importance_functions(target)
+        params = self.params()
+        # the mixture softens its weights, l · log G^n (5.69), with l fixed or annealed
+        G = importance_functions(target, self.k, self.partition,
+                                 None if self.variant == "mixture" else self.power)
         T = self.n_iterations
         run = Run(target, T, progress=progress, callback=callback, desc=f"pmc/{self.variant}",
                   rows=self.n_samples * (T + 4 if self.keep_history else 8))
-        ctx = Context(run, np.random.default_rng(seed), bounds)
-        step, history = STEPS[self.variant], History(self.keep_history)
-        start = (space_filling(bounds, self.n_samples, ctx.rng) if self.initial == "halton"
+        rng = np.random.default_rng(seed)
+        start = (space_filling(bounds, self.n_samples, rng) if self.initial == "halton"
                  else grid(bounds, self.n_samples, faces=self.initial == "grid_faces"))
-        state = init_state(start, self.power)
-        for n in range(T):
-            state, lg = step(self, ctx, state, n, G[n % len(G)])
-            lw = state.log_weight
-            if n == T - 1:  # final reweighting with the full target
-                lt = state.log_target
-                lt = run.evaluate(target, state.x) if lt is None else lt
-                lw = final_log_weight(state, lt)
-                run.offer(state.x, lt)
-            elif self.variant != "thesis1":  # thesis1 already offered full-target values
-                run.offer_candidate(state.x, lg)
-            history.record(state.x, lw)
-            run.step(n, ess(lw), sigma=self.sigma(n), resampled=state.resampled,
-                     power=state.power)
+        history = History(self.keep_history)
+
+        def report(n: int, info: StepInfo) -> dict[str, Any]:
+            return {"sigma": params.sigma(n), "resampled": info.resampled, "power": info.power}
+
+        state, lt, lw = iterate(run, ALGORITHMS[self.variant], params, start, rng, G, target,
+                                bounds, history, report)
         # the thesis variants' final weights ϱ/G divide by an unnormalised G^{T-1} whose
         # draws only approximately follow it: no normaliser is defined, none reported
-        ev = (mixture_log_evidence(state, lw, bounds, ctx.rng) if self.variant == "mixture"
+        ev = (mixture_log_evidence(state, lw, bounds, rng) if self.variant == "mixture"
               else {})
         return run.finish(state.x, lt, lw, sampler=self.name, config=self.get_config(),
                           seed=seed, **ev, **history.build_kwargs())

@@ -24,11 +24,14 @@ fixed power, :data:`~mrfpe.samplers.kit.THESIS_POWER`). It is biased: ``1/g^n``
 ignores the jitter, so on a 3-D Gaussian its final ESS is ~10 of 1000 and the mean
 ~1 sd off, with the same sign over seeds. ``"mixture"`` (the default)
 accounts for the jitter: by 5.6 PPF over one time step is PMC, so each partition
-runs PMC's deterministic-mixture step (:func:`mrfpe.samplers.pmc.mixture_step`:
+runs PMC's deterministic-mixture step (:func:`mrfpe.samplers.pmc_steps.mixture_step`:
 weights ``g^n(x)^l / q^n(x)`` with ``q^n`` the jittered resample's density, a kernel
 following the cloud's covariance, the power annealed, ``power="auto"``) from the
 same grid, and the final weights are ``ϱ(x) / q(x)``; they give ``log_evidence`` and
-``log_evidence_se`` as PMC's do (:func:`mrfpe.samplers.pmc.mixture_log_evidence`).
+``log_evidence_se`` as PMC's do (:func:`mrfpe.samplers.pmc_steps.mixture_log_evidence`).
+The thesis weights run PMC (II)'s literal step
+(:func:`mrfpe.samplers.pmc_steps.thesis2_literal_step`); both through the same
+driver as PMC (:func:`mrfpe.samplers.pmc_steps.iterate`).
 
 ``σ_n = σ₀ (1 − n/P)``; a jittered particle that leaves the bounds is redrawn
 from the same kernel. Particles where ``g^n`` vanishes get zero weight. The MAP
@@ -52,20 +55,16 @@ from mrfpe.samplers.kit import (
     check_bool,
     check_seed,
     check_target,
-    ess,
     grid,
     grid_reading,
-    partition_or_none,
-    softened,
 )
-from mrfpe.samplers.pmc import (
-    PMC,
-    Context,
-    final_log_weight,
-    init_state,
+from mrfpe.samplers.pmc_steps import (
+    ALGORITHMS,
+    PMCParams,
+    StepInfo,
+    importance_functions,
+    iterate,
     mixture_log_evidence,
-    mixture_step,
-    thesis2_literal_step,
 )
 
 __all__ = ["PPF"]
@@ -105,47 +104,44 @@ class PPF(Sampler):
         self.resampling = check_choice("resampling", resampling, RESAMPLING_METHODS)
         self.keep_history = check_bool("keep_history", keep_history)
 
+    def params(self) -> PMCParams:
+        """The frozen parameters of the steps: ``P`` iterations of the jitter schedule, the
+        mixture step's covariance kernel (the thesis's step uses the spherical ``σ_n``)."""
+        kernel = "covariance" if self.weights == "mixture" else "isotropic"
+        return PMCParams(self.n_samples, self.n_partitions, self.sigma0, self.resampling,
+                         self.power, kernel=kernel)
+
     def sigma(self, n: int) -> float:
         """Jitter of partition n: ``σ_n = σ₀ (1 − n/P)``."""
-        return self.sigma0 * (1.0 - n / self.n_partitions)
-
-    def _mixture_config(self) -> PMC:
-        """The PMC whose mixture step is this PPF's with the jitter accounted for."""
-        return PMC(self.n_samples, self.n_partitions, variant="mixture", k=self.k,
-                   partition=self.partition, power=self.power, sigma0=self.sigma0,
-                   kernel="covariance", resampling=self.resampling, initial=self.initial)
+        return self.params().sigma(n)
 
     def run(self, target: Any, *, seed: int | None = None, progress: bool = False,
             callback: Callback | None = None) -> xr.Dataset:
         """Sample ``target``; returns the posterior Dataset (DESIGN.md)."""
         bounds = check_target(target)
         check_seed(seed)
-        P = self.n_partitions
-        parts = partition_or_none(target, self.k, self.partition) or [target]
+        P, params = self.n_partitions, self.params()
         if self.weights == "thesis":
             # 5.33 (π ← π g^n), resample with noise, 5.34 (π ← π / g^n): PMC (II)'s step
-            G, cfg, step = [softened(p, self.power) for p in parts], self, thesis2_literal_step
+            algorithm = ALGORITHMS["thesis2_literal"]
+            G = importance_functions(target, self.k, self.partition, self.power)
         else:  # the jitter accounted for: PMC's deterministic-mixture step (thesis 5.6)
-            G, cfg, step = parts, self._mixture_config(), mixture_step
+            algorithm = ALGORITHMS["mixture"]
+            G = importance_functions(target, self.k, self.partition)
         run = Run(target, P, progress=progress, callback=callback, desc="ppf",
                   rows=self.n_samples * (P + 4 if self.keep_history else 8))
-        ctx = Context(run, np.random.default_rng(seed), bounds)
-        start = grid(bounds, self.n_samples, faces=self.initial == "grid_faces")
-        state = init_state(start, self.power)  # p(X^0): uniform
+        rng = np.random.default_rng(seed)
+        start = grid(bounds, self.n_samples, faces=self.initial == "grid_faces")  # p(X^0)
         history = History(self.keep_history)
-        for n in range(P):
-            state, lg = step(cfg, ctx, state, n, G[n % len(G)])
-            lw = state.log_weight
-            if n == P - 1:
-                lt = run.evaluate(target, state.x)
-                lw = final_log_weight(state, lt)  # 5.35: π ← π ϱ(x)
-                run.offer(state.x, lt)
-            else:
-                run.offer_candidate(state.x, lg)
-            history.record(state.x, lw)
-            run.step(n, ess(lw), sigma=self.sigma(n))
+
+        def report(n: int, info: StepInfo) -> dict[str, Any]:
+            return {"sigma": params.sigma(n)}
+
+        # the last iteration reweights with the full target, 5.35: π ← π ϱ(x)
+        state, lt, lw = iterate(run, algorithm, params, start, rng, G, target, bounds,
+                                history, report)
         # mixture weights are importance weights (PMC's evidence); the thesis's 1/g^n are not
-        ev = (mixture_log_evidence(state, lw, bounds, ctx.rng) if self.weights == "mixture"
+        ev = (mixture_log_evidence(state, lw, bounds, rng) if self.weights == "mixture"
               else {})
         return run.finish(state.x, lt, lw, sampler=self.name, config=self.get_config(),
                           seed=seed, **ev, **history.build_kwargs())

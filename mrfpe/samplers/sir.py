@@ -73,6 +73,7 @@ from mrfpe.samplers.kit import (
     log_resampling_mixture,
     partition_or_none,
     resample,
+    resampling_components,
     softened,
 )
 
@@ -166,8 +167,7 @@ class SIR(Sampler):
         chol = covariance_kernel(x, lw)
         x_new, lq = jitter_mixture(x, idx, chol, bounds, rng)
         lt = run.evaluate(target, x_new)
-        anc, counts = np.unique(idx, return_counts=True)
-        mixture = (x[anc], np.log(counts / idx.size), chol)  # for the evidence's box mass
+        mixture = (*resampling_components(x, idx), chol)  # for the evidence's box mass
         return x_new, lt, log_ratio((t + 1) / self.n_iterations * lt, lq), mixture
 
     def _alternative_step(self, target, run, u):

@@ -8,6 +8,7 @@ from mrfpe import posterior as P
 from mrfpe.mixture import log_mixture_density
 from mrfpe.samplers.kit import grid, jitter, log_kernel_mass
 from mrfpe.samplers.pmc import PMC
+from mrfpe.samplers.pmc_steps import jitter_scale, soften
 from mrfpe.testing import CorrelatedGaussian, TwoModes
 
 QUICK = {"n_samples": 200, "n_iterations": 6, "power": 1.0}
@@ -228,20 +229,20 @@ def test_auto_power_anneals_and_resolves_a_sharp_direction():
 def test_adaptive_kernel_scales():
     rng = np.random.default_rng(1)
     x = rng.normal([0.5, 0.5, 0.5], [0.001, 0.05, 0.2], size=(1000, 3))
-    s = PMC(sigma0=0.07, n_iterations=10)
+    params = PMC(sigma0=0.07, n_iterations=10, kernel="adaptive").params()
     h = (4 / (5 * 1000)) ** (1 / 7)  # Silverman's factor, d = 3
-    k = s._kernel(2, x, np.zeros(1000))
+    k = jitter_scale(params, 2, x, np.zeros(1000))
     sd = x.std(axis=0)
     assert np.allclose(k, [h * sd[0], h * sd[1], 0.07 * 0.8])  # capped by σ_2 = 0.056
-    assert PMC(variant="thesis2", n_iterations=10)._kernel(2, x, np.zeros(1000)) == 0.07 * 0.8
+    thesis = PMC(variant="thesis2", n_iterations=10).params()
+    assert jitter_scale(thesis, 2, x, np.zeros(1000)) == 0.07 * 0.8
 
 
 def test_auto_power_weights_keep_the_ess_fraction():
     rng = np.random.default_rng(0)
     raw, lq = rng.normal(scale=50, size=400), rng.normal(size=400)
-    s = PMC(auto_ess=0.5)
-    l, lw = s._soften(raw, lq, 0.0)
+    l, lw = soften(raw, lq, 0.0, "auto", 0.5)
     assert np.isclose(P.ess(lw), 0.5 * P.ess(-lq), rtol=1e-3)
     assert np.allclose(lw, l * raw - lq)
-    l2, _ = s._soften(raw, lq, l)
+    l2, _ = soften(raw, lq, l, "auto", 0.5)
     assert l2 >= l

@@ -77,7 +77,7 @@ def test_compound_weight_is_the_importance_function(readings, target):
 
 def _resampling_weights(target, monkeypatch, **config):
     """The log weights every resampling of one PMC run sees."""
-    pmc = pytest.importorskip("mrfpe.samplers.pmc")
+    pmc = pytest.importorskip("mrfpe.samplers.pmc_steps")
     seen = []
     real = pmc.resample
 

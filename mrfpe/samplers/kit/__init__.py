@@ -32,6 +32,8 @@ Run log
     :func:`mrfpe.posterior.build` keyword: the diagnostics hook).
 Records
     :class:`History` (every step's weighted set, for ``keep_history``),
+    :func:`start_chains` (an MCMC run's common opening: validation, the run log,
+    starting states in the support and the kept-state record, a :class:`ChainStart`),
     :class:`KeptStates` (an MCMC run's post-burn-in, thinned states; its
     :meth:`~KeptStates.trace_ess` is the ``ess`` trace entry: ArviZ's chain ESS at
     :data:`ESS_CHECKPOINTS` evenly spaced kept steps, NaN elsewhere).
@@ -40,15 +42,19 @@ Validators
     :func:`check_range`, :func:`check_choice`, :func:`check_bool`,
     :func:`check_chain_length`.
 Random walks
-    :class:`AdaptiveRandomWalk` (Gaussian proposals in the box, adapted during
-    burn-in only), :func:`metropolis_accept` (the Metropolis rule).
+    :func:`random_walk_proposal` (Gaussian proposals and which lie in the box),
+    :func:`evaluate_inside` (the target at those only: the others are rejected
+    without evaluation), :func:`in_box`, :func:`metropolis_accept` (the Metropolis
+    rule), :class:`AdaptiveRandomWalk` (the proposal's scale and shape, adapted
+    during burn-in only).
 Starting points
     :func:`grid` (the thesis's evenly spaced set), :func:`space_filling`
     (scrambled Halton points, any dimension), :func:`draw_in_support`.
 Jitter kernels
     :func:`jitter` (Gaussian truncated to the box), :func:`log_kernel_mass`
     (its normalisers), :func:`log_mixture_density`, :func:`log_resampling_mixture`
-    (the density a jittered resample was drawn from); for full-covariance kernels
+    (the density a jittered resample was drawn from), :func:`resampling_components`
+    (that mixture's distinct ancestors and shares); for full-covariance kernels
     :func:`jitter_resampled` (out-of-box draws take a fresh ancestor, so the
     normaliser is global), :func:`log_mixture_density_chol`,
     :func:`covariance_kernel` (a kernel shaped like the weighted cloud) and
@@ -75,7 +81,13 @@ from mrfpe.mixture import log_mixture_density
 from mrfpe.resampling import METHODS as RESAMPLING_METHODS
 from mrfpe.resampling import ess, log_ratio, normalise_log_weights, perplexity, resample
 from mrfpe.samplers.kit.batching import map_batched
-from mrfpe.samplers.kit.chains import ESS_CHECKPOINTS, KeptStates, check_chain_length
+from mrfpe.samplers.kit.chains import (
+    ESS_CHECKPOINTS,
+    ChainStart,
+    KeptStates,
+    check_chain_length,
+    start_chains,
+)
 from mrfpe.samplers.kit.draws import (
     GRID_READINGS,
     draw_in_support,
@@ -99,8 +111,15 @@ from mrfpe.samplers.kit.jitter import (
     log_kernel_mass,
     log_mixture_density_chol,
     log_resampling_mixture,
+    resampling_components,
 )
-from mrfpe.samplers.kit.random_walk import AdaptiveRandomWalk, metropolis_accept
+from mrfpe.samplers.kit.random_walk import (
+    AdaptiveRandomWalk,
+    evaluate_inside,
+    in_box,
+    metropolis_accept,
+    random_walk_proposal,
+)
 from mrfpe.samplers.kit.runlog import Run
 from mrfpe.validation import (
     check_bool,
@@ -119,6 +138,7 @@ __all__ = [
     "THESIS2_POWER",
     "THESIS_POWER",
     "AdaptiveRandomWalk",
+    "ChainStart",
     "History",
     "KeptStates",
     "Run",
@@ -133,8 +153,10 @@ __all__ = [
     "covariance_kernel",
     "draw_in_support",
     "ess",
+    "evaluate_inside",
     "grid",
     "grid_reading",
+    "in_box",
     "jitter",
     "jitter_mixture",
     "jitter_resampled",
@@ -150,7 +172,10 @@ __all__ = [
     "normalise_log_weights",
     "partition_or_none",
     "perplexity",
+    "random_walk_proposal",
     "resample",
+    "resampling_components",
     "softened",
     "space_filling",
+    "start_chains",
 ]

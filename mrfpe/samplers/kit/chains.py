@@ -1,14 +1,23 @@
-"""What only chains need: chain-length checks and the kept (post-burn-in, thinned) states."""
+"""What only chains need: chain-length checks, the run's start and the kept states.
+
+:func:`start_chains` is the common opening of an MCMC sampler's ``run``:
+validate the target and the seed, open the run log, draw the chains' starting
+states in the support and prepare the record of the kept (post-burn-in,
+thinned) states, :class:`KeptStates`.
+"""
 
 from __future__ import annotations
 
-from typing import Any
+from collections.abc import Callable
+from typing import Any, NamedTuple
 
 import numpy as np
 
-from mrfpe.validation import check_positive_int
+from mrfpe.samplers.kit.draws import draw_in_support
+from mrfpe.samplers.kit.runlog import Run
+from mrfpe.validation import check_positive_int, check_seed, check_target
 
-__all__ = ["ESS_CHECKPOINTS", "KeptStates", "check_chain_length"]
+__all__ = ["ESS_CHECKPOINTS", "ChainStart", "KeptStates", "check_chain_length", "start_chains"]
 
 #: How many evenly spaced kept steps (the last included) get an ESS in the MCMC
 #: ``ess`` trace (:meth:`KeptStates.trace_ess`); ArviZ's ESS over the whole run so far
@@ -93,3 +102,36 @@ class KeptStates:
     def chain(self) -> np.ndarray:
         """(S,) chain index of each flattened sample (for per-chain diagnostics)."""
         return np.tile(np.arange(self.theta.shape[1]), self.steps.size)
+
+
+class ChainStart(NamedTuple):
+    """The opening of an MCMC run (:func:`start_chains`)."""
+
+    bounds: np.ndarray  # (d, 2), validated
+    rng: np.random.Generator  # every random choice of the run, from ``seed``
+    run: Run  # the run log (evaluation count, MAP trace, progress, callback)
+    x: np.ndarray  # (C, d) the chains' starting states, in the support
+    log_target: np.ndarray  # (C,) their log densities
+    kept: KeptStates  # the record of the kept states
+
+
+def start_chains(target: Any, seed: int | None, *, n_steps: int, n_chains: int, burn_in: int,
+                 thin: int, desc: str, progress: bool = False,
+                 callback: Callable[[int, dict], Any] | None = None,
+                 weighted: bool = False) -> ChainStart:
+    """Open an MCMC run of ``n_chains`` chains of ``n_steps`` steps on ``target``.
+
+    Validates the target (:func:`check_target`) and ``seed``, seeds the random
+    stream, opens the :class:`Run` (its memory check counts the kept states and the
+    burn-in), draws the starting states uniformly in the support
+    (:func:`draw_in_support`, counted) and prepares :class:`KeptStates` (with
+    weights when ``weighted``). ``desc`` names the progress bar.
+    """
+    bounds = check_target(target)
+    check_seed(seed)
+    rng = np.random.default_rng(seed)
+    run = Run(target, n_steps, progress=progress, callback=callback, desc=desc,
+              rows=n_steps + n_chains * (n_steps // thin + burn_in + 4))
+    x, lp = draw_in_support(run, target, rng, n_chains, bounds)
+    kept = KeptStates(n_steps, burn_in, thin, n_chains, bounds.shape[0], weighted=weighted)
+    return ChainStart(bounds, rng, run, x, lp, kept)

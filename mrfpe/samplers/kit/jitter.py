@@ -15,7 +15,7 @@ import numpy as np
 
 __all__ = ["COV_ESS", "KERNEL_SCALE", "covariance_kernel", "jitter", "jitter_mixture",
            "jitter_resampled", "log_kernel_mass", "log_mixture_density_chol",
-           "log_resampling_mixture"]
+           "log_resampling_mixture", "resampling_components"]
 
 
 def jitter(x: np.ndarray, sigma: float | np.ndarray, bounds: np.ndarray,
@@ -108,9 +108,16 @@ def log_resampling_mixture(x_new: np.ndarray, source: np.ndarray, idx: np.ndarra
     """
     from mrfpe.mixture import log_mixture_density
 
+    centres, log_share = resampling_components(source, idx)
+    log_w = log_share - log_kernel_mass(centres, sigma, bounds)
+    return log_mixture_density(x_new, centres, log_w, sigma)
+
+
+def resampling_components(source: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The components of the mixture a jittered resample ``source[idx]`` is drawn from:
+    the distinct ancestors ``(U, d)`` and their log shares ``log(count / N)`` (U,)."""
     anc, counts = np.unique(idx, return_counts=True)
-    log_w = np.log(counts / idx.size) - log_kernel_mass(source[anc], sigma, bounds)
-    return log_mixture_density(x_new, source[anc], log_w, sigma)
+    return source[anc], np.log(counts / idx.size)
 
 
 #: :func:`covariance_kernel` defaults: scale on Silverman's factor, and the ESS fraction
@@ -156,6 +163,5 @@ def jitter_mixture(x: np.ndarray, idx: np.ndarray, chol: np.ndarray, bounds: np.
     (:func:`jitter_resampled`) and return ``(x_new, log q(x_new))`` with ``q`` the
     mixture the draws follow (up to one global constant): what deterministic-mixture
     weights ``ϱ / q`` need."""
-    anc, counts = np.unique(idx, return_counts=True)
     x_new = jitter_resampled(x[idx], chol, bounds, rng)
-    return x_new, log_mixture_density_chol(x_new, x[anc], np.log(counts / idx.size), chol)
+    return x_new, log_mixture_density_chol(x_new, *resampling_components(x, idx), chol)

@@ -1,20 +1,56 @@
-"""Random-walk Metropolis pieces shared by MCMC samplers: the proposal and the accept rule.
+"""Random-walk Metropolis pieces shared by MCMC samplers: proposals in a box and the accept rule.
 
-:class:`AdaptiveRandomWalk` proposes ``theta' = theta + s L z`` (``z ~ N(0, I)``)
-for every chain at once and says which proposals lie in the box; proposals
-outside it are rejected without being evaluated (their density is zero; the
-thesis does the same in 7.4). With ``adapt=True`` it is tuned *during burn-in
-only* -- the scale by Robbins-Monro towards ``target_acceptance``, the shape to
-the chains' empirical covariance (Haario et al. 2001) -- and then frozen, so
-the post-burn-in chain is a plain Metropolis chain.
-:func:`metropolis_accept` is the Metropolis rule (thesis 5.44, 5.45).
+:func:`random_walk_proposal` draws ``theta' = theta + s L z`` (``z ~ N(0, I)``)
+for every chain at once and says which proposals lie in the box;
+:func:`evaluate_inside` evaluates the target at those only: proposals outside
+the box are rejected without being evaluated (their density is zero; the thesis
+does the same in 7.4). :func:`metropolis_accept` is the Metropolis rule (thesis
+5.44, 5.45). :class:`AdaptiveRandomWalk` keeps ``s`` and ``L`` and tunes them
+with ``adapt=True`` *during burn-in only* -- the scale by Robbins-Monro towards
+``target_acceptance``, the shape to the chains' empirical covariance (Haario et
+al. 2001) -- and then freezes them, so the post-burn-in chain is a plain
+Metropolis chain.
 """
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
-__all__ = ["AdaptiveRandomWalk", "metropolis_accept"]
+__all__ = ["AdaptiveRandomWalk", "evaluate_inside", "in_box", "metropolis_accept",
+           "random_walk_proposal"]
+
+
+def in_box(y: np.ndarray, bounds: np.ndarray) -> np.ndarray:
+    """(n,) bool: which rows of ``y`` (n, d) lie in the box ``bounds`` (d, 2), faces included."""
+    return np.all((y >= bounds[:, 0]) & (y <= bounds[:, 1]), axis=1)
+
+
+def random_walk_proposal(x: np.ndarray, spread: np.ndarray, bounds: np.ndarray,
+                         rng: np.random.Generator, scale: float = 1.0,
+                         ) -> tuple[np.ndarray, np.ndarray]:
+    """Gaussian random-walk proposals for every row of ``x`` (n, d), and which are in the box.
+
+    ``theta' = theta + scale · L z`` with ``z ~ N(0, I)`` drawn from ``rng``; ``spread``
+    is ``L``, a lower Cholesky factor (d, d), or one sd per parameter (d,) (``L``
+    diagonal). Returns ``(proposals (n, d), inside (n,) bool)``: pass both to
+    :func:`evaluate_inside`, which rejects the others without evaluating them.
+    """
+    z = rng.standard_normal(x.shape)
+    spread = np.asarray(spread, dtype=np.float64)
+    y = x + (scale * z @ spread.T if spread.ndim == 2 else scale * z * spread)
+    return y, in_box(y, bounds)
+
+
+def evaluate_inside(run: Any, target: Any, y: np.ndarray, inside: np.ndarray) -> np.ndarray:
+    """Log density of each proposal (n,): ``run.evaluate(target, ·)`` (counted) on the rows
+    ``inside`` the box, ``-inf`` without evaluation on the others (outside the box the
+    density is zero)."""
+    lp = np.full(y.shape[0], -np.inf)
+    if inside.any():
+        lp[inside] = run.evaluate(target, y[inside])
+    return lp
 
 
 def metropolis_accept(log_u: np.ndarray, lp_current: np.ndarray,
@@ -50,6 +86,7 @@ class AdaptiveRandomWalk:
 
     def __init__(self, bounds: np.ndarray, n_chains: int, proposal_sd: float, burn_in: int,
                  adapt: bool = True, target_acceptance: float = 0.234) -> None:
+        self.bounds = bounds
         self.lo, self.hi = bounds[:, 0], bounds[:, 1]
         self.d = bounds.shape[0]
         self.burn_in, self.adapt, self.target_acceptance = burn_in, adapt, target_acceptance
@@ -62,9 +99,8 @@ class AdaptiveRandomWalk:
         return float(np.exp(self.log_scale))
 
     def propose(self, x: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-        """``(proposals (c, d), inside (c,) bool)``."""
-        y = x + self.scale * rng.standard_normal(x.shape) @ self.chol.T
-        return y, np.all((y >= self.lo) & (y <= self.hi), axis=1)
+        """``(proposals (c, d), inside (c,) bool)`` (:func:`random_walk_proposal`)."""
+        return random_walk_proposal(x, self.chol, self.bounds, rng, self.scale)
 
     def update(self, t: int, x: np.ndarray, acceptance: float) -> None:
         """Adapt after step ``t`` (states ``x``, acceptance rate) -- during burn-in only."""

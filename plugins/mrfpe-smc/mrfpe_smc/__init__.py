@@ -10,7 +10,10 @@ from the uniform law on the box (β = 0) to the target (β = 1) through
 the incremental weights p^(β' − β) is ``ess_fraction`` × N, (2) resamples
 systematically, (3) makes random-walk Metropolis moves on π_β' with the cloud's
 covariance times s² (s steered towards ``target_acceptance``), as many as make a
-particle move at least once with probability ``mixing``.
+particle move at least once with probability ``mixing`` — with the kit's random-walk
+pieces, as ``mh``: :func:`~mrfpe.samplers.kit.random_walk_proposal`,
+:func:`~mrfpe.samplers.kit.evaluate_inside` (proposals outside the box are rejected
+without evaluation) and :func:`~mrfpe.samplers.kit.metropolis_accept`.
 
 ``log_evidence`` = log(∫_box p / vol(box)) (mrfpe's convention,
 :mod:`mrfpe.samplers.kit.evidence`): the support's share of the box times the product
@@ -145,16 +148,13 @@ class AdaptiveTemperingSMC(Sampler):
             cov = np.atleast_2d(np.cov(x, rowvar=False)) + np.diag((1e-9 * (hi - lo)) ** 2)
             chol = np.linalg.cholesky(cov)
             k, accepted = self._moves(acc), 0
-            for _ in range(k):
-                y = x + math.exp(log_scale) * rng.standard_normal((n, d)) @ chol.T
-                inside = np.all((y >= lo) & (y <= hi), axis=1)
-                lpy = np.full(n, -np.inf)
-                if inside.any():
-                    lpy[inside] = run.evaluate(target, y[inside])
-                    run.offer(y[inside], lpy[inside])
-                with np.errstate(invalid="ignore"):
+            for _ in range(k):  # proposals outside the box are rejected unevaluated
+                y, inside = kit.random_walk_proposal(x, chol, b, rng, math.exp(log_scale))
+                lpy = kit.evaluate_inside(run, target, y, inside)
+                run.offer(y[inside], lpy[inside])
+                with np.errstate(invalid="ignore"):  # the tempered ratio (π_β'(y)/π_β'(x))
                     log_alpha = np.where(np.isfinite(lpy), beta * (lpy - lp), -np.inf)
-                move = np.log(rng.random(n)) < log_alpha
+                move = kit.metropolis_accept(np.log(rng.random(n)), np.zeros(n), log_alpha)
                 x[move], lp[move] = y[move], lpy[move]
                 accepted += int(move.sum())
             acc = accepted / (k * n)

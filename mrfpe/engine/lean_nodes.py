@@ -81,8 +81,8 @@ def lean_terms_nodes(coef, nb, full, iso, recT, nrecT, unaryT, obs, inv_sigma, c
     ``coef`` is (5, N) without padding; ``recT``, ``nrecT``: the node-major tables
     (:class:`mrfpe.engine.template.LeanTables`);
     ``unaryT``: (B, n) in log2 units. Same formula and order of operations per
-    (particle, node, label) as :func:`~mrfpe.engine.lean.lean_terms`; the node terms are then summed per
-    chunk in node order, as there, so the sums do not depend on the block size. The
+    (particle, node, label) as :func:`~mrfpe.engine.lean.lean_terms`; the node terms are
+    then summed per chunk in node order, as there, so the sums do not depend on the block size. The
     fields are bound to 1-D rows (``recT[k, s]``) so that numba's code knows their unit
     stride and loads vectors, not gathers, and indexed from 0 so that no
     negative-index wraparound is compiled in.

@@ -24,7 +24,15 @@ import numpy as np
 from numba import njit, prange
 
 from mrfpe.engine.fastmath import FASTMATH, LN2, exp2_64
-from mrfpe.engine.lean_nodes import NODE_BLOCK, label_rows_full, label_rows_ward
+from mrfpe.engine.lean_nodes import NODE_BLOCK
+from mrfpe.engine.slots import (
+    energy,
+    exps_ward,
+    label_rows_full,
+    label_rows_ward,
+    residuals_full,
+    residuals_ward,
+)
 
 __all__ = ["grad_nodes"]
 
@@ -53,7 +61,8 @@ def grad_nodes(coef, full, iso, recT, nrecT, unaryT, obs, inv_sigma, n, a, b,
     memory once for all K (from L2 after the first), and every particle's numbers are
     the same whatever K.
     Rows are bound as 1-D slices indexed from 0 (unit strides, no negative-index
-    wraparound), so numba's code loads vectors, not gathers.
+    wraparound), so numba's code loads vectors, not gathers. The slot residuals and
+    energies are :mod:`mrfpe.engine.slots`', the same code as the values kernel's.
     """
     B = unaryT.shape[0]
     K = coef.shape[1]
@@ -98,90 +107,80 @@ def grad_nodes(coef, full, iso, recT, nrecT, unaryT, obs, inv_sigma, n, a, b,
                 xs = np.empty((6, NB))  # one label's triangle exponentials
                 x0, x1, x2, x3, x4, x5 = xs[0], xs[1], xs[2], xs[3], xs[4], xs[5]
                 for s in range(B):
-                    (u, a0, a1, a2, a3, f01, g01, f02, g02, f11, g11, f12, g12, f21, g21, f22, g22,
-                     f31, g31, f32, g32, f41, g41, f42, g42, f51, g51, f52,
-                     g52) = label_rows_full(recT, unaryT, s, sl)
+                    r = label_rows_full(recT, unaryT, s, sl)
                     es, g0s, g1s, g2s, g3s, g4s = en[s], g[0, s], g[1, s], g[2, s], g[3, s], g[4, s]
                     if iso:  # E1 G1 + 0 G2 is E1 G1 exactly: the G2 rows stay unread
                         for j in range(m):
-                            x0[j] = exp2_64(E1 * g01[j])
-                            x1[j] = exp2_64(E1 * g11[j])
-                            x2[j] = exp2_64(E1 * g21[j])
+                            x0[j] = exp2_64(E1 * r.g01[j])
+                            x1[j] = exp2_64(E1 * r.g11[j])
+                            x2[j] = exp2_64(E1 * r.g21[j])
                         for j in range(m):
-                            x3[j] = exp2_64(E1 * g31[j])
-                            x4[j] = exp2_64(E1 * g41[j])
-                            x5[j] = exp2_64(E1 * g51[j])
+                            x3[j] = exp2_64(E1 * r.g31[j])
+                            x4[j] = exp2_64(E1 * r.g41[j])
+                            x5[j] = exp2_64(E1 * r.g51[j])
                     else:
                         for j in range(m):
-                            x0[j] = exp2_64(E1 * g01[j] + E2 * g02[j])
-                            x1[j] = exp2_64(E1 * g11[j] + E2 * g12[j])
-                            x2[j] = exp2_64(E1 * g21[j] + E2 * g22[j])
+                            x0[j] = exp2_64(E1 * r.g01[j] + E2 * r.g02[j])
+                            x1[j] = exp2_64(E1 * r.g11[j] + E2 * r.g12[j])
+                            x2[j] = exp2_64(E1 * r.g21[j] + E2 * r.g22[j])
                         for j in range(m):
-                            x3[j] = exp2_64(E1 * g31[j] + E2 * g32[j])
-                            x4[j] = exp2_64(E1 * g41[j] + E2 * g42[j])
-                            x5[j] = exp2_64(E1 * g51[j] + E2 * g52[j])
+                            x3[j] = exp2_64(E1 * r.g31[j] + E2 * r.g32[j])
+                            x4[j] = exp2_64(E1 * r.g41[j] + E2 * r.g42[j])
+                            x5[j] = exp2_64(E1 * r.g51[j] + E2 * r.g52[j])
                     for j in range(m):
-                        s10 = f01[j] * x0[j] + f11[j] * x1[j]
-                        s20 = f02[j] * x0[j] + f12[j] * x1[j]
-                        s11 = f21[j] * x2[j] + f31[j] * x3[j]
-                        s21 = f22[j] * x2[j] + f32[j] * x3[j]
-                        s12 = ha1[j] + f41[j] * x4[j]
-                        s22 = ha2[j] + f42[j] * x4[j]
-                        s13 = hb1[j] + f51[j] * x5[j]
-                        s23 = hb2[j] + f52[j] * x5[j]
-                        t0 = y0[j] - C0 * a0[j] - C1 * s10 - C2 * s20
-                        t1 = y1[j] - C0 * a1[j] - C1 * s11 - C2 * s21
-                        t2 = y2[j] - C0 * a2[j] - C1 * s12 - C2 * s22
-                        t3 = y3[j] - C0 * a3[j] - C1 * s13 - C2 * s23
+                        s10 = r.f01[j] * x0[j] + r.f11[j] * x1[j]
+                        s20 = r.f02[j] * x0[j] + r.f12[j] * x1[j]
+                        s11 = r.f21[j] * x2[j] + r.f31[j] * x3[j]
+                        s21 = r.f22[j] * x2[j] + r.f32[j] * x3[j]
+                        s12 = ha1[j] + r.f41[j] * x4[j]
+                        s22 = ha2[j] + r.f42[j] * x4[j]
+                        s13 = hb1[j] + r.f51[j] * x5[j]
+                        s23 = hb2[j] + r.f52[j] * x5[j]
+                        t0 = y0[j] - C0 * r.a0[j] - C1 * s10 - C2 * s20
+                        t1 = y1[j] - C0 * r.a1[j] - C1 * s11 - C2 * s21
+                        t2 = y2[j] - C0 * r.a2[j] - C1 * s12 - C2 * s22
+                        t3 = y3[j] - C0 * r.a3[j] - C1 * s13 - C2 * s23
                         k0, k1, k2, k3 = _sgn(t0), _sgn(t1), _sgn(t2), _sgn(t3)
-                        es[j] = u[j] + isg * (abs(t0) + abs(t1) + abs(t2) + abs(t3))
-                        g0s[j] = isn * (k0 * a0[j] + k1 * a1[j] + k2 * a2[j] + k3 * a3[j])
+                        es[j] = energy(r.u[j], isg, (t0, t1, t2, t3))
+                        g0s[j] = isn * (k0 * r.a0[j] + k1 * r.a1[j] + k2 * r.a2[j] + k3 * r.a3[j])
                         g1s[j] = isn * (k0 * s10 + k1 * s11 + k2 * s12 + k3 * s13)
                         g2s[j] = isn * (k0 * s20 + k1 * s21 + k2 * s22 + k3 * s23)
                     if iso:  # dE/de1 without the G2 rows; dE/de2 = 0 (below)
                         for j in range(m):
-                            q0 = (C1 * f01[j] + C2 * f02[j]) * x0[j]
-                            q1 = (C1 * f11[j] + C2 * f12[j]) * x1[j]
-                            q2 = (C1 * f21[j] + C2 * f22[j]) * x2[j]
-                            q3 = (C1 * f31[j] + C2 * f32[j]) * x3[j]
-                            q4 = (C1 * f41[j] + C2 * f42[j]) * x4[j]
-                            q5 = (C1 * f51[j] + C2 * f52[j]) * x5[j]
-                            t0 = (y0[j] - C0 * a0[j] - C1 * (f01[j] * x0[j] + f11[j] * x1[j])
-                                  - C2 * (f02[j] * x0[j] + f12[j] * x1[j]))
-                            t1 = (y1[j] - C0 * a1[j] - C1 * (f21[j] * x2[j] + f31[j] * x3[j])
-                                  - C2 * (f22[j] * x2[j] + f32[j] * x3[j]))
-                            t2 = (y2[j] - C0 * a2[j] - C1 * (ha1[j] + f41[j] * x4[j])
-                                  - C2 * (ha2[j] + f42[j] * x4[j]))
-                            t3 = (y3[j] - C0 * a3[j] - C1 * (hb1[j] + f51[j] * x5[j])
-                                  - C2 * (hb2[j] + f52[j] * x5[j]))
+                            q0 = (C1 * r.f01[j] + C2 * r.f02[j]) * x0[j]
+                            q1 = (C1 * r.f11[j] + C2 * r.f12[j]) * x1[j]
+                            q2 = (C1 * r.f21[j] + C2 * r.f22[j]) * x2[j]
+                            q3 = (C1 * r.f31[j] + C2 * r.f32[j]) * x3[j]
+                            q4 = (C1 * r.f41[j] + C2 * r.f42[j]) * x4[j]
+                            q5 = (C1 * r.f51[j] + C2 * r.f52[j]) * x5[j]
+                            t0, t1, t2, t3 = residuals_full(
+                                r, j, C0, C1, C2, (x0[j], x1[j], x2[j], x3[j], x4[j], x5[j]),
+                                (ha1[j], ha2[j], hb1[j], hb2[j]), (y0[j], y1[j], y2[j], y3[j]))
                             k0, k1, k2, k3 = _sgn(t0), _sgn(t1), _sgn(t2), _sgn(t3)
-                            g3s[j] = isn * (k0 * (q0 * g01[j] + q1 * g11[j])
-                                            + k1 * (q2 * g21[j] + q3 * g31[j])
-                                            + k2 * (wa1[j] + q4 * g41[j])
-                                            + k3 * (wb1[j] + q5 * g51[j]))
+                            g3s[j] = isn * (k0 * (q0 * r.g01[j] + q1 * r.g11[j])
+                                            + k1 * (q2 * r.g21[j] + q3 * r.g31[j])
+                                            + k2 * (wa1[j] + q4 * r.g41[j])
+                                            + k3 * (wb1[j] + q5 * r.g51[j]))
                         continue
                     for j in range(m):
-                        q0 = (C1 * f01[j] + C2 * f02[j]) * x0[j]
-                        q1 = (C1 * f11[j] + C2 * f12[j]) * x1[j]
-                        q2 = (C1 * f21[j] + C2 * f22[j]) * x2[j]
-                        q3 = (C1 * f31[j] + C2 * f32[j]) * x3[j]
-                        q4 = (C1 * f41[j] + C2 * f42[j]) * x4[j]
-                        q5 = (C1 * f51[j] + C2 * f52[j]) * x5[j]
-                        t0 = (y0[j] - C0 * a0[j] - C1 * (f01[j] * x0[j] + f11[j] * x1[j])
-                              - C2 * (f02[j] * x0[j] + f12[j] * x1[j]))
-                        t1 = (y1[j] - C0 * a1[j] - C1 * (f21[j] * x2[j] + f31[j] * x3[j])
-                              - C2 * (f22[j] * x2[j] + f32[j] * x3[j]))
-                        t2 = (y2[j] - C0 * a2[j] - C1 * (ha1[j] + f41[j] * x4[j])
-                              - C2 * (ha2[j] + f42[j] * x4[j]))
-                        t3 = (y3[j] - C0 * a3[j] - C1 * (hb1[j] + f51[j] * x5[j])
-                              - C2 * (hb2[j] + f52[j] * x5[j]))
+                        q0 = (C1 * r.f01[j] + C2 * r.f02[j]) * x0[j]
+                        q1 = (C1 * r.f11[j] + C2 * r.f12[j]) * x1[j]
+                        q2 = (C1 * r.f21[j] + C2 * r.f22[j]) * x2[j]
+                        q3 = (C1 * r.f31[j] + C2 * r.f32[j]) * x3[j]
+                        q4 = (C1 * r.f41[j] + C2 * r.f42[j]) * x4[j]
+                        q5 = (C1 * r.f51[j] + C2 * r.f52[j]) * x5[j]
+                        t0, t1, t2, t3 = residuals_full(
+                            r, j, C0, C1, C2, (x0[j], x1[j], x2[j], x3[j], x4[j], x5[j]),
+                            (ha1[j], ha2[j], hb1[j], hb2[j]), (y0[j], y1[j], y2[j], y3[j]))
                         k0, k1, k2, k3 = _sgn(t0), _sgn(t1), _sgn(t2), _sgn(t3)
-                        g3s[j] = isn * (k0 * (q0 * g01[j] + q1 * g11[j])
-                                        + k1 * (q2 * g21[j] + q3 * g31[j])
-                                        + k2 * (wa1[j] + q4 * g41[j]) + k3 * (wb1[j] + q5 * g51[j]))
-                        g4s[j] = isn * (k0 * (q0 * g02[j] + q1 * g12[j])
-                                        + k1 * (q2 * g22[j] + q3 * g32[j])
-                                        + k2 * (wa2[j] + q4 * g42[j]) + k3 * (wb2[j] + q5 * g52[j]))
+                        g3s[j] = isn * (k0 * (q0 * r.g01[j] + q1 * r.g11[j])
+                                        + k1 * (q2 * r.g21[j] + q3 * r.g31[j])
+                                        + k2 * (wa1[j] + q4 * r.g41[j])
+                                        + k3 * (wb1[j] + q5 * r.g51[j]))
+                        g4s[j] = isn * (k0 * (q0 * r.g02[j] + q1 * r.g12[j])
+                                        + k1 * (q2 * r.g22[j] + q3 * r.g32[j])
+                                        + k2 * (wa2[j] + q4 * r.g42[j])
+                                        + k3 * (wb2[j] + q5 * r.g52[j]))
             else:
                 na, nga, nb, ngb = nrecT[4, sl], nrecT[5, sl], nrecT[6, sl], nrecT[7, sl]
                 for j in range(m):
@@ -190,32 +189,25 @@ def grad_nodes(coef, full, iso, recT, nrecT, unaryT, obs, inv_sigma, n, a, b,
                     wa1[j] = ha1[j] * nga[j]
                     wb1[j] = hb1[j] * ngb[j]
                 for s in range(B):
-                    (u, a0, a1, a2, a3, f0, e0, f1, e1, f2, e2, f3, e3, f4, e4, f5,
-                     e5) = label_rows_ward(recT, unaryT, s, sl)
+                    r = label_rows_ward(recT, unaryT, s, sl)
                     es, g0s, g1s, g3s = en[s], g[0, s], g[1, s], g[3, s]  # dE/dc2, e2 = 0
                     for j in range(m):
-                        p0 = exp2_64(E1 * e0[j] + f0[j])
-                        p1 = exp2_64(E1 * e1[j] + f1[j])
-                        p2 = exp2_64(E1 * e2[j] + f2[j])
-                        p3 = exp2_64(E1 * e3[j] + f3[j])
-                        p4 = exp2_64(E1 * e4[j] + f4[j])
-                        p5 = exp2_64(E1 * e5[j] + f5[j])
+                        p0, p1, p2, p3, p4, p5 = exps_ward(r, j, E1)
                         s10 = p0 + p1
                         s11 = p2 + p3
                         s12 = ha1[j] + p4
                         s13 = hb1[j] + p5
-                        t0 = y0[j] - C0 * a0[j] - C1 * s10
-                        t1 = y1[j] - C0 * a1[j] - C1 * s11
-                        t2 = y2[j] - C0 * a2[j] - C1 * s12
-                        t3 = y3[j] - C0 * a3[j] - C1 * s13
+                        t0, t1, t2, t3 = residuals_ward(r, j, C0, C1, (p0, p1, p2, p3, p4, p5),
+                                                        (ha1[j], hb1[j]),
+                                                        (y0[j], y1[j], y2[j], y3[j]))
                         k0, k1, k2, k3 = _sgn(t0), _sgn(t1), _sgn(t2), _sgn(t3)
-                        es[j] = u[j] + isg * (abs(t0) + abs(t1) + abs(t2) + abs(t3))
-                        g0s[j] = isn * (k0 * a0[j] + k1 * a1[j] + k2 * a2[j] + k3 * a3[j])
+                        es[j] = energy(r.u[j], isg, (t0, t1, t2, t3))
+                        g0s[j] = isn * (k0 * r.a0[j] + k1 * r.a1[j] + k2 * r.a2[j] + k3 * r.a3[j])
                         g1s[j] = isn * (k0 * s10 + k1 * s11 + k2 * s12 + k3 * s13)
-                        g3s[j] = isn * C1 * (k0 * (p0 * e0[j] + p1 * e1[j])
-                                             + k1 * (p2 * e2[j] + p3 * e3[j])
-                                             + k2 * (wa1[j] + p4 * e4[j])
-                                             + k3 * (wb1[j] + p5 * e5[j]))
+                        g3s[j] = isn * C1 * (k0 * (p0 * r.g0[j] + p1 * r.g1[j])
+                                             + k1 * (p2 * r.g2[j] + p3 * r.g3[j])
+                                             + k2 * (wa1[j] + p4 * r.g4[j])
+                                             + k3 * (wb1[j] + p5 * r.g5[j]))
             for j in range(m):
                 mn[j] = en[0, j]
                 tot[j] = 0.0

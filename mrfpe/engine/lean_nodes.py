@@ -13,9 +13,18 @@ import numpy as np
 from numba import njit, prange
 
 from mrfpe.engine.fastmath import FASTMATH, LN2, fexp2, flog
+from mrfpe.engine.slots import (
+    energy,
+    exps_full,
+    exps_iso,
+    exps_ward,
+    label_rows_full,
+    label_rows_ward,
+    residuals_full,
+    residuals_ward,
+)
 
-__all__ = ["NODE_BLOCK", "NODE_BLOCK_MAX", "label_rows_full", "label_rows_ward",
-           "lean_terms_nodes", "node_block"]
+__all__ = ["NODE_BLOCK", "NODE_BLOCK_MAX", "lean_terms_nodes", "node_block"]
 
 
 #: Fewest nodes per block of :func:`lean_terms_nodes` (and the block of
@@ -43,34 +52,6 @@ def node_block(n_nodes: int, n_threads: int) -> int:
     return nb
 
 
-@njit(inline="always", cache=True)
-def label_rows_full(recT, unaryT, s, sl):  # pragma: no cover - compiled
-    """Label ``s``'s rows of node block ``sl`` in the node-major full-form tables.
-
-    ``(u, a0..a3, f01, g01, f02, g02, ..., f51, g51, f52, g52)``: the unary energy,
-    the four slots' albedo terms, and per variable triangle ``t = 0..5`` its two
-    terms' feature ``f_tk`` and exponent ``g_tk`` (``LeanTables.recT``). Bound as 1-D
-    views indexed from 0, so loops over them load vectors, not gathers.
-    """
-    return (unaryT[s, sl], recT[0, s, sl], recT[1, s, sl], recT[2, s, sl], recT[3, s, sl],
-            recT[4, s, sl], recT[5, s, sl], recT[6, s, sl], recT[7, s, sl],
-            recT[8, s, sl], recT[9, s, sl], recT[10, s, sl], recT[11, s, sl],
-            recT[12, s, sl], recT[13, s, sl], recT[14, s, sl], recT[15, s, sl],
-            recT[16, s, sl], recT[17, s, sl], recT[18, s, sl], recT[19, s, sl],
-            recT[20, s, sl], recT[21, s, sl], recT[22, s, sl], recT[23, s, sl],
-            recT[24, s, sl], recT[25, s, sl], recT[26, s, sl], recT[27, s, sl])
-
-
-@njit(inline="always", cache=True)
-def label_rows_ward(recT, unaryT, s, sl):  # pragma: no cover - compiled
-    """As :func:`label_rows_full` for the Ward/Lambertian tables: ``(u, a0..a3, f0, g0, ...,
-    f5, g5)``, one term per variable triangle."""
-    return (unaryT[s, sl], recT[0, s, sl], recT[1, s, sl], recT[2, s, sl], recT[3, s, sl],
-            recT[4, s, sl], recT[5, s, sl], recT[6, s, sl], recT[7, s, sl],
-            recT[8, s, sl], recT[9, s, sl], recT[10, s, sl], recT[11, s, sl],
-            recT[12, s, sl], recT[13, s, sl], recT[14, s, sl], recT[15, s, sl])
-
-
 @njit(parallel=True, fastmath=FASTMATH, error_model="numpy", cache=True)
 def lean_terms_nodes(coef, nb, full, iso, recT, nrecT, unaryT, obs, inv_sigma, chunk_ptr, a,
                      b, do_lse, out_chunk, out_node, per_node):  # pragma: no cover - compiled
@@ -85,7 +66,8 @@ def lean_terms_nodes(coef, nb, full, iso, recT, nrecT, unaryT, obs, inv_sigma, c
     then summed per chunk in node order, as there, so the sums do not depend on the block size. The
     fields are bound to 1-D rows (``recT[k, s]``) so that numba's code knows their unit
     stride and loads vectors, not gathers, and indexed from 0 so that no
-    negative-index wraparound is compiled in.
+    negative-index wraparound is compiled in; the per-slot formulas are
+    :mod:`mrfpe.engine.slots`', shared with the Jacobian kernel.
 
     The particles loop inside each (block, label), so a label's rows are read once
     for all N: at 100x100 nodes and 20 labels one particle's pass streams the whole
@@ -130,9 +112,7 @@ def lean_terms_nodes(coef, nb, full, iso, recT, nrecT, unaryT, obs, inv_sigma, c
                     qb1[j] = hb1[j] * xb
                     qb2[j] = hb2[j] * xb
             for s in range(B):
-                (u, a0, a1, a2, a3, f01, g01, f02, g02, f11, g11, f12, g12, f21, g21, f22,
-                 g22, f31, g31, f32, g32, f41, g41, f42, g42, f51, g51, f52,
-                 g52) = label_rows_full(recT, unaryT, s, sl)
+                r = label_rows_full(recT, unaryT, s, sl)
                 for q in range(N):
                     C0 = coef[0, q]
                     C1 = coef[1, q]
@@ -145,38 +125,16 @@ def lean_terms_nodes(coef, nb, full, iso, recT, nrecT, unaryT, obs, inv_sigma, c
                     # of its own: one loop with the branch inside changed LLVM's FMAs (the bits)
                     if iso:
                         for j in range(m):
-                            x0 = fexp2(E1 * g01[j])
-                            x1 = fexp2(E1 * g11[j])
-                            x2 = fexp2(E1 * g21[j])
-                            x3 = fexp2(E1 * g31[j])
-                            x4 = fexp2(E1 * g41[j])
-                            x5 = fexp2(E1 * g51[j])
-                            d = abs(y0[j] - C0 * a0[j] - C1 * (f01[j] * x0 + f11[j] * x1)
-                                    - C2 * (f02[j] * x0 + f12[j] * x1))
-                            d += abs(y1[j] - C0 * a1[j] - C1 * (f21[j] * x2 + f31[j] * x3)
-                                     - C2 * (f22[j] * x2 + f32[j] * x3))
-                            d += abs(y2[j] - C0 * a2[j] - C1 * (qa1[j] + f41[j] * x4)
-                                     - C2 * (qa2[j] + f42[j] * x4))
-                            d += abs(y3[j] - C0 * a3[j] - C1 * (qb1[j] + f51[j] * x5)
-                                     - C2 * (qb2[j] + f52[j] * x5))
-                            es[j] = u[j] + inv_sigma * d
+                            t = residuals_full(r, j, C0, C1, C2, exps_iso(r, j, E1),
+                                               (qa1[j], qa2[j], qb1[j], qb2[j]),
+                                               (y0[j], y1[j], y2[j], y3[j]))
+                            es[j] = energy(r.u[j], inv_sigma, t)
                         continue
                     for j in range(m):
-                        x0 = fexp2(E1 * g01[j] + E2 * g02[j])
-                        x1 = fexp2(E1 * g11[j] + E2 * g12[j])
-                        x2 = fexp2(E1 * g21[j] + E2 * g22[j])
-                        x3 = fexp2(E1 * g31[j] + E2 * g32[j])
-                        x4 = fexp2(E1 * g41[j] + E2 * g42[j])
-                        x5 = fexp2(E1 * g51[j] + E2 * g52[j])
-                        d = abs(y0[j] - C0 * a0[j] - C1 * (f01[j] * x0 + f11[j] * x1)
-                                - C2 * (f02[j] * x0 + f12[j] * x1))
-                        d += abs(y1[j] - C0 * a1[j] - C1 * (f21[j] * x2 + f31[j] * x3)
-                                 - C2 * (f22[j] * x2 + f32[j] * x3))
-                        d += abs(y2[j] - C0 * a2[j] - C1 * (qa1[j] + f41[j] * x4)
-                                 - C2 * (qa2[j] + f42[j] * x4))
-                        d += abs(y3[j] - C0 * a3[j] - C1 * (qb1[j] + f51[j] * x5)
-                                 - C2 * (qb2[j] + f52[j] * x5))
-                        es[j] = u[j] + inv_sigma * d
+                        t = residuals_full(r, j, C0, C1, C2, exps_full(r, j, E1, E2),
+                                           (qa1[j], qa2[j], qb1[j], qb2[j]),
+                                           (y0[j], y1[j], y2[j], y3[j]))
+                        es[j] = energy(r.u[j], inv_sigma, t)
         else:
             ha1, ga1, hb1, gb1 = nrecT[4, sl], nrecT[5, sl], nrecT[6, sl], nrecT[7, sl]
             for q in range(N):  # h, f: log2 of the weights (folded)
@@ -186,8 +144,7 @@ def lean_terms_nodes(coef, nb, full, iso, recT, nrecT, unaryT, obs, inv_sigma, c
                     qa1[j] = fexp2(E1 * ga1[j] + ha1[j])
                     qb1[j] = fexp2(E1 * gb1[j] + hb1[j])
             for s in range(B):
-                (u, a0, a1, a2, a3, f0, g0, f1, g1, f2, g2, f3, g3, f4, g4, f5,
-                 g5) = label_rows_ward(recT, unaryT, s, sl)
+                r = label_rows_ward(recT, unaryT, s, sl)
                 for q in range(N):
                     C0 = coef[0, q]
                     C1 = coef[1, q]
@@ -195,13 +152,9 @@ def lean_terms_nodes(coef, nb, full, iso, recT, nrecT, unaryT, obs, inv_sigma, c
                     qa1, qb1 = fa1[q], fb1[q]
                     es = en[q, s]
                     for j in range(m):
-                        d = abs(y0[j] - C0 * a0[j]
-                                - C1 * (fexp2(E1 * g0[j] + f0[j]) + fexp2(E1 * g1[j] + f1[j])))
-                        d += abs(y1[j] - C0 * a1[j]
-                                 - C1 * (fexp2(E1 * g2[j] + f2[j]) + fexp2(E1 * g3[j] + f3[j])))
-                        d += abs(y2[j] - C0 * a2[j] - C1 * (qa1[j] + fexp2(E1 * g4[j] + f4[j])))
-                        d += abs(y3[j] - C0 * a3[j] - C1 * (qb1[j] + fexp2(E1 * g5[j] + f5[j])))
-                        es[j] = u[j] + inv_sigma * d
+                        t = residuals_ward(r, j, C0, C1, exps_ward(r, j, E1), (qa1[j], qb1[j]),
+                                           (y0[j], y1[j], y2[j], y3[j]))
+                        es[j] = energy(r.u[j], inv_sigma, t)
         for q in range(N):
             enq = en[q]
             if do_lse:

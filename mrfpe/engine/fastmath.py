@@ -274,7 +274,7 @@ SCALEF = {"avx512f", "avx512vl"} <= compiled_features()
 
 
 def _call_llvm(name: str, ret: ir.Type, *args: ir.Type):
-    """An ``emit`` for :func:`~mrfpe.targets.kernels.unary_intrinsic`: call LLVM's ``name``."""
+    """An ``emit`` for :func:`unary_intrinsic`: call LLVM's ``name``."""
     fnty = ir.FunctionType(ret, list(args))
     return lambda builder, *xs: builder.call(
         cgutils.get_or_insert_function(builder.module, fnty, name), list(xs))

@@ -1,7 +1,8 @@
 """Lean against classic kernel in one process: ns/eval, speed of light, PMC, LM, growth.
 
 Everything is a **ratio in one run**: each comparison alternates the two
-kernels (``mrfpe.targets.dispatch.use_kernel``) and takes medians of several
+kernels (a target built with each ``kernel`` option on one scene, sharing its tables)
+and takes medians of several
 repeats, so a shared, noisy machine slows both alike.
 
 * ``ns/eval`` at N = 1000 (Ward and Phong, float32 and float64, 100 x 100, 20 labels)
@@ -57,9 +58,9 @@ OPS_PER_EVAL, FMA_OPS_PER_EVAL = 16.3, 8.2
 def _fma_kernel():
     from numba import njit
 
-    from mrfpe.targets.kernels import _FM
+    from mrfpe.engine.fastmath import FASTMATH
 
-    @njit(fastmath=_FM, error_model="numpy")
+    @njit(fastmath=FASTMATH, error_model="numpy")
     def fma_rate(x, n, m, c):
         # 16 dependent FMAs per element between one load and one store: the loop over
         # elements vectorises (one array, no alias checks) and out-of-order execution
@@ -134,26 +135,31 @@ def _scene(brdf: str, shape, n_labels: int):
                       surface="smooth" if brdf == "ward" else "jagged", seed=0)
 
 
-def ns_per_eval(target, n: int, repeat: int, kernels=("classic", "lean")) -> dict:
-    """Median wall and CPU ns per BRDF evaluation of each kernel, alternated."""
+def _targets(scene, kernels=("classic", "lean"), **options) -> dict:
+    """``pls`` on ``scene`` once per kernel family (the ``kernel`` option); one set of tables."""
+    import mrfpe
+
+    return {k: mrfpe.targets.get("pls", scene, kernel=k, **options) for k in kernels}
+
+
+def ns_per_eval(targets: dict, n: int, repeat: int) -> dict:
+    """Median wall and CPU ns per BRDF evaluation of each kernel's target, alternated."""
     import numba
 
-    from mrfpe.targets.dispatch import use_kernel
-
-    x = np.random.default_rng(0).random((n, target.ndim))
-    ev = target._tables.brdf_evals_per_particle * n
+    kernels = tuple(targets)
+    first = targets[kernels[0]]
+    x = np.random.default_rng(0).random((n, first.ndim))
+    ev = first._tables.brdf_evals_per_particle * n
     for k in kernels:
-        with use_kernel(k):
-            target.log_prob(x)
+        targets[k].log_prob(x)
     wall = {k: [] for k in kernels}
     cpu = {k: [] for k in kernels}
     for _ in range(repeat):
         for k in kernels:
-            with use_kernel(k):
-                w0, c0 = time.perf_counter(), time.process_time()
-                target.log_prob(x)
-                wall[k].append(time.perf_counter() - w0)
-                cpu[k].append(time.process_time() - c0)
+            w0, c0 = time.perf_counter(), time.process_time()
+            targets[k].log_prob(x)
+            wall[k].append(time.perf_counter() - w0)
+            cpu[k].append(time.process_time() - c0)
     thr = numba.get_num_threads()
     return {k: (np.median(wall[k]) / ev * 1e9, np.median(cpu[k]) / ev * 1e9 / thr)
             for k in kernels}
@@ -166,15 +172,13 @@ def _today(kernel: str):
     import mrfpe.samplers.pmc as pmc_mod
     from mrfpe import threads
     from mrfpe.mixture import log_mixture_density, log_mixture_density_numpy
-    from mrfpe.targets.dispatch import use_kernel
 
     today = kernel == "classic"
     pmc_mod.log_mixture_density = log_mixture_density_numpy if today else log_mixture_density
     blas = threads.BLAS_THREADS
     threads.BLAS_THREADS = None if today else blas
     try:
-        with use_kernel(kernel):
-            yield
+        yield
     finally:
         pmc_mod.log_mixture_density = log_mixture_density
         threads.BLAS_THREADS = blas
@@ -184,17 +188,18 @@ def pmc_compare(shape, n_labels, dtype, n_samples, n_iter, repeat) -> dict:
     """PMC today (classic kernel + NumPy mixture density) against lean + numba mixture."""
     import mrfpe
 
-    t = mrfpe.targets.get("pls", _scene("ward", shape, n_labels), dtype=dtype)
+    ts = _targets(_scene("ward", shape, n_labels), dtype=dtype)
     out = {}
     for k in ("classic", "lean"):
         with _today(k):
-            mrfpe.sample("pmc", t, seed=0, n_samples=50, n_iterations=2)  # warm
+            mrfpe.sample("pmc", ts[k], seed=0, n_samples=50, n_iterations=2)  # warm
     times = {"classic": [], "lean": []}
     for _ in range(repeat):
         for k in ("classic", "lean"):
             with _today(k), peak_memory() as mem:
                 t0 = time.perf_counter()
-                post = mrfpe.sample("pmc", t, seed=0, n_samples=n_samples, n_iterations=n_iter)
+                post = mrfpe.sample("pmc", ts[k], seed=0, n_samples=n_samples,
+                                    n_iterations=n_iter)
                 times[k].append(time.perf_counter() - t0)
             out[k + "_map"] = post["map_theta"].values[-1]
             out[k + "_rss"] = mem["rss_MiB"]
@@ -207,7 +212,7 @@ def lm_compare(shape, n_labels, n_seeds, repeat) -> dict:
     import mrfpe
     from mrfpe.targets import jacobian
 
-    t = mrfpe.targets.get("pls", _scene("ward", shape, n_labels))
+    ts = _targets(_scene("ward", shape, n_labels))
     orig = jacobian.supports
     times = {"today": [], "new": []}
     maps = {}
@@ -217,7 +222,8 @@ def lm_compare(shape, n_labels, n_seeds, repeat) -> dict:
                 jacobian.supports = orig if k == "new" else (lambda target: False)
                 with _today("lean" if k == "new" else "classic"):
                     t0 = time.perf_counter()
-                    post = mrfpe.sample("lm_multiseed", t, seed=0,
+                    post = mrfpe.sample("lm_multiseed", ts["lean" if k == "new" else "classic"],
+                                        seed=0,
                                         n_seeds=n_seeds if r >= 0 else 1)
                     if r >= 0:
                         times[k].append(time.perf_counter() - t0)
@@ -229,9 +235,8 @@ def lm_compare(shape, n_labels, n_seeds, repeat) -> dict:
 
 
 def _mib(t) -> float:
-    from mrfpe.targets.lean import lean_tables
-
-    return (t.nbytes + lean_tables(t._tables, False).nbytes) / 2**20
+    """Classic and lean tables (with the lean ones' node-major copy, built with them)."""
+    return (t.nbytes + t._engine_tables.lean.nbytes) / 2**20
 
 
 PARTS = ("nseval", "pmc", "lm", "growth")
@@ -258,10 +263,10 @@ def run(quick: bool = False, parts: tuple[str, ...] = PARTS) -> list[str]:
     for brdf in ("ward", "phong") if "nseval" in parts else ():
         scene = _scene(brdf, shape, 10 if quick else 20)
         for dt in ("float32", "float64"):
-            t = mrfpe.targets.get("pls", scene, dtype=dt)
-            r = ns_per_eval(t, 1000 if not quick else 200, rep)
-            one = ns_per_eval(t, 1, 4 * rep)
-            ms1 = {k: one[k][0] * t._tables.brdf_evals_per_particle / 1e6 for k in one}
+            ts = _targets(scene, dtype=dt)
+            r = ns_per_eval(ts, 1000 if not quick else 200, rep)
+            one = ns_per_eval(ts, 1, 4 * rep)
+            ms1 = {k: one[k][0] * ts[k]._tables.brdf_evals_per_particle / 1e6 for k in one}
             s = sol[dt]
             rows.append(f"| {brdf} | {dt} | {r['classic'][0]:.3f} | {r['lean'][0]:.3f} | "
                         f"{r['lean'][0] / r['classic'][0]:.2f} | {r['classic'][1]:.3f} | "
@@ -311,14 +316,14 @@ def run(quick: bool = False, parts: tuple[str, ...] = PARTS) -> list[str]:
          "tables MiB (classic + lean) |", "|---|---|---|---|---|---|"]
     for B in labels:
         t = mrfpe.targets.get("pls", _scene("ward", shape, B), dtype="float32")
-        r = ns_per_eval(t, 200, rep, ("lean",))["lean"]
+        r = ns_per_eval({"lean": t}, 200, rep)["lean"]
         g.append(f"| labels | {t._tables.n_nodes} | {B} | {r[0]:.3f} | "
                  f"{r[0] * t._tables.brdf_evals_per_particle * 200 / 1e6:.1f} | "
                  f"{_mib(t):.0f} |")
         print(g[-1], flush=True)
     for sh in sizes:
         t = mrfpe.targets.get("pls", _scene("ward", sh, 20 if not quick else 10), dtype="float32")
-        r = ns_per_eval(t, 200, max(2, rep // 2), ("lean",))["lean"]
+        r = ns_per_eval({"lean": t}, 200, max(2, rep // 2))["lean"]
         g.append(f"| lattice {sh[0]}² | {t._tables.n_nodes} | {20 if not quick else 10} | "
                  f"{r[0]:.3f} | {r[0] * t._tables.brdf_evals_per_particle * 200 / 1e6:.1f} | "
                  f"{_mib(t):.0f} |")

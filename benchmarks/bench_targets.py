@@ -57,9 +57,9 @@ def comparison_kernel():
     """The bare-minimum loop for the same Ward evaluations and label log-sum-exps."""
     from numba import njit, prange
 
-    from mrfpe.targets.kernels import _FM, vexp, vlog
+    from mrfpe.engine.fastmath import FASTMATH, vexp, vlog
 
-    @njit(parallel=True, fastmath=_FM, error_model="numpy")
+    @njit(parallel=True, fastmath=FASTMATH, error_model="numpy")
     def floor(coef, feat, n_nodes, B, nv, bl, out):
         npad = coef.shape[1]
         nblk = npad // bl
@@ -116,9 +116,9 @@ def bench(brdf: str, shape: tuple[int, int], labels: list[int], repeat: int, pmc
     import numba
 
     import mrfpe
+    from mrfpe.engine.classic import block_size
     from mrfpe.synthetic import make_scene
     from mrfpe.targets import reflectance
-    from mrfpe.targets.kernels import block_size
 
     model = mrfpe.brdf.get(brdf)
     threads = numba.get_num_threads()

@@ -30,6 +30,8 @@ from typing import Any
 
 import numpy as np
 
+from mrfpe.geometry import cross, dot
+
 __all__ = [
     "BRDF",
     "AshikhminShirley",
@@ -42,22 +44,6 @@ __all__ = [
 ]
 
 _PI = np.pi
-
-
-def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Component-wise dot product over the last axis (same rounding for any shape)."""
-    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.stack(
-        [
-            a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
-            a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
-            a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0],
-        ],
-        axis=-1,
-    )
 
 
 def _vec(x: Any, name: str) -> np.ndarray:
@@ -181,8 +167,8 @@ class BRDF:
 
 def _visibility(n, l, v):
     """cos_i = n.l, cos_o = n.v and the mask where both are positive."""
-    ci = _dot(n, l)
-    co = _dot(n, v)
+    ci = dot(n, l)
+    co = dot(n, v)
     valid = (ci > 0) & (co > 0)
     return ci, co, valid
 
@@ -241,11 +227,11 @@ class Ward(BRDF):
     def _features(self, n, l, v, t):
         ci, co, valid = _visibility(n, l, v)
         h = l + v
-        hn = _dot(h, n)
+        hn = dot(h, n)
         hp = h - hn[..., None] * n
         ok = valid & (hn > 0)
         hn_s = np.where(ok, hn, 1.0)
-        tan2 = np.where(ok, _dot(hp, hp) / (hn_s * hn_s), 0.0)
+        tan2 = np.where(ok, dot(hp, hp) / (hn_s * hn_s), 0.0)
         prod = np.where(ok, ci * co, 1.0)
         spec_norm = np.where(ok, 1.0 / (4.0 * _PI * np.sqrt(prod)), 0.0)
         return np.stack([ok.astype(np.float64), spec_norm, tan2])
@@ -284,12 +270,12 @@ class WardAnisotropic(BRDF):
     def _features(self, n, l, v, t):
         ci, co, valid = _visibility(n, l, v)
         h = l + v
-        hn = _dot(h, n)
+        hn = dot(h, n)
         ok = valid & (hn > 0)
         hn_s = np.where(ok, hn, 1.0)
-        b = _cross(n, t)
-        x = _dot(h, t) / hn_s
-        y = _dot(h, b) / hn_s
+        b = cross(n, t)
+        x = dot(h, t) / hn_s
+        y = dot(h, b) / hn_s
         prod = np.where(ok, ci * co, 1.0)
         spec_norm = np.where(ok, 1.0 / (4.0 * _PI * np.sqrt(prod)), 0.0)
         return np.stack([ok.astype(np.float64), spec_norm,
@@ -308,11 +294,11 @@ def _as_common(n, l, v):
     """Ashikhmin-Shirley geometry shared by both variants."""
     nl, nv, valid = _visibility(n, l, v)
     h = l + v
-    hh = _dot(h, h)
+    hh = dot(h, h)
     ok = valid & (hh > 0)
     h = h / np.sqrt(np.where(ok, hh, 1.0))[..., None]
-    nh = np.where(ok, _dot(n, h), 1.0)
-    kh = np.where(ok, _dot(l, h), 1.0)  # = v.h for the unit half vector
+    nh = np.where(ok, dot(n, h), 1.0)
+    kh = np.where(ok, dot(l, h), 1.0)  # = v.h for the unit half vector
     nl_s = np.where(ok, nl, 1.0)
     nv_s = np.where(ok, nv, 1.0)
     # 3.16 without R_d (1 - R_s): angle-dependent diffuse factor.
@@ -356,8 +342,8 @@ class AshikhminShirley(BRDF):
         s2 = 1.0 - nh * nh
         ok2 = ok & (s2 > 1e-300)
         s2_s = np.where(ok2, s2, 1.0)
-        hu = _dot(h, t)
-        hv = _dot(h, _cross(n, t))
+        hu = dot(h, t)
+        hv = dot(h, cross(n, t))
         a = np.where(ok2, hu * hu / s2_s, 0.5)
         b = np.where(ok2, hv * hv / s2_s, 0.5)
         return np.stack([fd, g, nh, q5, a, b])

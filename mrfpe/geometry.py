@@ -30,17 +30,21 @@ __all__ = [
     "PointLight",
     "ProjectiveCamera",
     "camera_from_dict",
+    "cross",
+    "dot",
     "light_from_dict",
     "triangle_normals",
     "triangulate_linear",
 ]
 
 
-def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Component-wise dot product over the last axis (same rounding for any shape)."""
     return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross product over the last axis."""
     return np.stack(
         [
             a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
@@ -52,7 +56,7 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def _unit(a: np.ndarray) -> np.ndarray:
-    return a / np.sqrt(_dot(a, a))[..., None]
+    return a / np.sqrt(dot(a, a))[..., None]
 
 
 def _points(X: Any, name: str = "X") -> np.ndarray:
@@ -95,7 +99,7 @@ class DirectionalLight:
 
     def __init__(self, direction: Any, irradiance: float = 1.0) -> None:
         d = _finite_array(direction, (3,), "direction")
-        norm = float(np.sqrt(_dot(d, d)))
+        norm = float(np.sqrt(dot(d, d)))
         if norm == 0.0:
             raise ValueError("direction must be a non-zero vector")
         self.direction = _finite_array(d / norm, (3,), "direction")
@@ -148,7 +152,7 @@ class PointLight:
 
     def irradiance(self, X: Any) -> np.ndarray:
         d = self.position - _points(X)
-        return self.intensity / _dot(d, d)
+        return self.intensity / dot(d, d)
 
     def to_dict(self) -> dict:
         return {"kind": self.kind, "position": self.position.tolist(),
@@ -190,8 +194,8 @@ class AffineCamera:
         b = [0.0, 0.0] if b is None else b
         self.A = _finite_array(A, (2, 3), "A")
         self.b = _finite_array(b, (2,), "b")
-        c = _cross(self.A[0], self.A[1])
-        nc = float(np.sqrt(_dot(c, c)))
+        c = cross(self.A[0], self.A[1])
+        nc = float(np.sqrt(dot(c, c)))
         if nc == 0.0:
             raise ValueError("A must have rank 2 (its rows are parallel)")
         self.direction = _finite_array(c / nc, (3,), "direction")
@@ -326,11 +330,11 @@ def triangle_normals(p0: Any, p1: Any, p2: Any, to_camera: Any) -> np.ndarray:
     (zero-area) triangles give a zero vector, which every BRDF maps to 0.
     """
     p0, p1, p2 = _points(p0, "p0"), _points(p1, "p1"), _points(p2, "p2")
-    c = _cross(p1 - p0, p2 - p0)
-    nn = np.sqrt(_dot(c, c))
+    c = cross(p1 - p0, p2 - p0)
+    nn = np.sqrt(dot(c, c))
     ok = nn > 0
     n = c / np.where(ok, nn, 1.0)[..., None]
-    flip = _dot(n, np.asarray(to_camera, dtype=np.float64)) < 0
+    flip = dot(n, np.asarray(to_camera, dtype=np.float64)) < 0
     return np.where(flip[..., None], -n, n)
 
 

@@ -21,7 +21,8 @@ Two triangulations live on the lattice:
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -65,22 +66,18 @@ class Lattice:
 
     H: int
     W: int
-    pixel_nodes: np.ndarray = field(init=False, repr=False, compare=False)
-    triangles: np.ndarray = field(init=False, repr=False, compare=False)
-    triangle_pixel: np.ndarray = field(init=False, repr=False, compare=False)
-    node_triangles: tuple[np.ndarray, np.ndarray] = field(init=False, repr=False, compare=False)
-    node_pixels: tuple[np.ndarray, np.ndarray] = field(init=False, repr=False, compare=False)
-    cliques: np.ndarray = field(init=False, repr=False, compare=False)
-    clique_pixel: np.ndarray = field(init=False, repr=False, compare=False)
-    node_cliques: tuple[np.ndarray, np.ndarray] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         for name in ("H", "W"):
             val = getattr(self, name)
             if isinstance(val, bool) or not isinstance(val, int | np.integer) or val < 1:
                 raise ValueError(f"{name} must be an integer >= 1; got {val!r}")
-            object.__setattr__(self, name, int(val))
-        H, W = self.H, self.W
+
+    # -- derived arrays: computed on first use, read-only -----------------------------
+    @cached_property
+    def _arrays(self) -> dict[str, Any]:
+        """Every derived array at once (they share their intermediate steps)."""
+        H, W = int(self.H), int(self.W)
         W1 = W + 1
         r, c = np.divmod(np.arange(H * W, dtype=np.int64), W)
         tl = r * W1 + c
@@ -106,37 +103,65 @@ class Lattice:
         cl_pix = pix[order]
 
         n_nodes = (H + 1) * W1
-        object.__setattr__(self, "pixel_nodes", pn)
-        object.__setattr__(self, "triangles", tri)
-        object.__setattr__(self, "triangle_pixel", tri_pix)
-        object.__setattr__(self, "node_triangles", _csr_from_pairs(tri.reshape(-1), n_nodes, 3))
-        object.__setattr__(self, "node_pixels", _csr_from_pairs(pn.reshape(-1), n_nodes, 4))
-        object.__setattr__(self, "cliques", cl)
-        object.__setattr__(self, "clique_pixel", cl_pix)
-        object.__setattr__(self, "node_cliques", _csr(cl[:, 0], n_nodes))
         for arr in (pn, tri, tri_pix, cl, cl_pix):
             arr.flags.writeable = False
+        return {"pixel_nodes": pn, "triangles": tri, "triangle_pixel": tri_pix,
+                "node_triangles": _csr_from_pairs(tri.reshape(-1), n_nodes, 3),
+                "node_pixels": _csr_from_pairs(pn.reshape(-1), n_nodes, 4),
+                "cliques": cl, "clique_pixel": cl_pix, "node_cliques": _csr(cl[:, 0], n_nodes)}
+
+    @property
+    def pixel_nodes(self) -> np.ndarray:
+        return self._arrays["pixel_nodes"]
+
+    @property
+    def triangles(self) -> np.ndarray:
+        return self._arrays["triangles"]
+
+    @property
+    def triangle_pixel(self) -> np.ndarray:
+        return self._arrays["triangle_pixel"]
+
+    @property
+    def node_triangles(self) -> tuple[np.ndarray, np.ndarray]:
+        return self._arrays["node_triangles"]
+
+    @property
+    def node_pixels(self) -> tuple[np.ndarray, np.ndarray]:
+        return self._arrays["node_pixels"]
+
+    @property
+    def cliques(self) -> np.ndarray:
+        return self._arrays["cliques"]
+
+    @property
+    def clique_pixel(self) -> np.ndarray:
+        return self._arrays["clique_pixel"]
+
+    @property
+    def node_cliques(self) -> tuple[np.ndarray, np.ndarray]:
+        return self._arrays["node_cliques"]
 
     # -- sizes --------------------------------------------------------------------
     @property
     def shape(self) -> tuple[int, int]:
-        return (self.H, self.W)
+        return (int(self.H), int(self.W))
 
     @property
     def node_shape(self) -> tuple[int, int]:
-        return (self.H + 1, self.W + 1)
+        return (int(self.H) + 1, int(self.W) + 1)
 
     @property
     def n_nodes(self) -> int:
-        return (self.H + 1) * (self.W + 1)
+        return (int(self.H) + 1) * (int(self.W) + 1)
 
     @property
     def n_pixels(self) -> int:
-        return self.H * self.W
+        return int(self.H) * int(self.W)
 
     @property
     def n_triangles(self) -> int:
-        return 2 * self.H * self.W
+        return 2 * int(self.H) * int(self.W)
 
     def node_id(self, r, c):
         """Node id of row ``r``, column ``c`` (arrays allowed)."""

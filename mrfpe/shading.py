@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from mrfpe import brdf as _brdf
-from mrfpe.geometry import _dot, triangle_normals
+from mrfpe.geometry import dot, triangle_normals
 
 __all__ = [
     "TriangleGeometry",
@@ -72,7 +72,7 @@ class TriangleGeometry:
     @property
     def cos_light(self) -> np.ndarray:
         """``max(n . l, 0)``, the foreshortening factor of the rendering equation."""
-        return np.maximum(_dot(self.n, self.l), 0.0)
+        return np.maximum(dot(self.n, self.l), 0.0)
 
 
 def _tangent(n: np.ndarray, ref: np.ndarray) -> np.ndarray:
@@ -81,16 +81,16 @@ def _tangent(n: np.ndarray, ref: np.ndarray) -> np.ndarray:
     Where ``ref`` is (nearly) parallel to ``n`` the projection is ill-defined;
     the projection of whichever world axis is least aligned with ``n`` is used there.
     """
-    t = ref - _dot(ref, n)[..., None] * n
-    tt = _dot(t, t)
+    t = ref - dot(ref, n)[..., None] * n
+    tt = dot(t, t)
     bad = tt < 1e-12
     if np.any(bad):
         axis = np.argmin(np.abs(n), axis=-1)
         alt = np.zeros_like(n)
         np.put_along_axis(alt, axis[..., None], 1.0, axis=-1)
-        alt = alt - _dot(alt, n)[..., None] * n
+        alt = alt - dot(alt, n)[..., None] * n
         t = np.where(bad[..., None], alt, t)
-        tt = _dot(t, t)
+        tt = dot(t, t)
     return t / np.sqrt(np.where(tt > 0, tt, 1.0))[..., None]
 
 

@@ -3,8 +3,9 @@
 Kept apart from the kernels so that studies and samplers can cap threads
 without importing (and compiling) the numba kernel module.
 
-Vector width (:func:`configure_vector_width`, run when the kernel modules are
-imported). LLVM tunes some AVX-512 CPUs (e.g. Rocket Lake, Ice/Cascade Lake) to
+Vector width (:func:`configure_vector_width`, run by :mod:`mrfpe.engine` before
+it defines its kernels; :func:`mrfpe.engine.fastmath.compiled_features` tells
+what the code is compiled for). LLVM tunes some AVX-512 CPUs (e.g. Rocket Lake, Ice/Cascade Lake) to
 prefer 256-bit vectors, which costs the kernels 1.2-1.45x. numba has no
 per-function target option and builds one LLVM target machine per process at its
 first compile, so the choice is process-wide: if the CPU has AVX-512F, neither
@@ -25,8 +26,8 @@ from contextlib import AbstractContextManager, contextmanager
 
 import numba
 
-__all__ = ["BLAS_THREADS", "MIN_EVALS_PER_THREAD", "blas_threads", "compiled_features",
-           "configure_vector_width", "limit_threads", "thread_budget", "vector_width"]
+__all__ = ["BLAS_THREADS", "MIN_EVALS_PER_THREAD", "blas_threads", "configure_vector_width",
+           "limit_threads", "thread_budget", "vector_width"]
 
 #: Environment variable that turns the 512-bit preference off ("0", "off", "no", "false").
 OPT_OUT_ENV = "MRFPE_AVX512"
@@ -175,27 +176,6 @@ def configure_vector_width() -> str:
             state = "512"
     _VECTOR_STATE["state"] = state
     return state
-
-
-def compiled_features() -> frozenset[str]:
-    """CPU features numba compiles for in this process (names without the ``+``).
-
-    ``NUMBA_CPU_FEATURES`` if set (by the user, or by :func:`configure_vector_width`);
-    nothing for a CPU named by ``NUMBA_CPU_NAME`` other than ``host`` (e.g. ``generic``
-    for a portable cache: its features are not known here, so no feature is assumed);
-    else the host's. Kernels that emit feature-specific code (AVX-512's ``vscalefps``
-    in :func:`mrfpe.targets.lean.exp2_32`) decide by this, so that code compiled for
-    a portable target never relies on the host.
-    """
-    import llvmlite.binding as ll
-
-    given = os.environ.get("NUMBA_CPU_FEATURES") or numba.config.CPU_FEATURES
-    if given:
-        return frozenset(f[1:] for f in given.split(",") if f.startswith("+"))
-    name = os.environ.get("NUMBA_CPU_NAME") or numba.config.CPU_NAME
-    if name and name != "host":
-        return frozenset()
-    return frozenset(k for k, on in ll.get_host_cpu_features().items() if on)
 
 
 def vector_width() -> int:

@@ -38,10 +38,10 @@ def kernels_cached() -> bool:
     """
     try:
         from mrfpe import mixture
-        from mrfpe.targets import lean
+        from mrfpe.engine import lean, lean_nodes
 
         return all(Path(k._cache._cache_file._index_path).exists()
-                   for k in (lean.lean_terms, lean.lean_terms_nodes, mixture._lse_rows))
+                   for k in (lean.lean_terms, lean_nodes.lean_terms_nodes, mixture._lse_rows))
     except Exception:  # numba internals differ: assume a cold cache
         return False
 

@@ -3,7 +3,7 @@ from __future__ import annotations
 import numba
 import pytest
 
-from mrfpe.threads import MIN_EVALS_PER_THREAD, compiled_features, thread_budget
+from mrfpe.threads import MIN_EVALS_PER_THREAD, thread_budget
 
 
 def test_thread_budget_scales_with_work_and_restores():
@@ -53,24 +53,6 @@ def test_sample_runs_samplers_with_one_blas_thread():
     mrfpe.sample("pmc", CorrelatedGaussian(), seed=0, n_samples=200, n_iterations=2,
                  callback=lambda step, info: seen.append(_blas_threads_now()))
     assert seen and all(set(s) == {1} for s in seen)
-
-
-def test_compiled_features_follow_numba_settings(monkeypatch):
-    import llvmlite.binding as ll
-
-    for var in ("NUMBA_CPU_FEATURES", "NUMBA_CPU_NAME"):
-        monkeypatch.delenv(var, raising=False)
-    monkeypatch.setattr(numba.config, "CPU_FEATURES", "")
-    monkeypatch.setattr(numba.config, "CPU_NAME", None)
-    host = {k for k, on in ll.get_host_cpu_features().items() if on}
-    assert compiled_features() == host
-    monkeypatch.setenv("NUMBA_CPU_FEATURES", "+avx2,-avx512f,+fma")
-    assert compiled_features() == {"avx2", "fma"}  # a "-" feature is off, not on
-    monkeypatch.delenv("NUMBA_CPU_FEATURES")
-    monkeypatch.setenv("NUMBA_CPU_NAME", "generic")  # a portable target: nothing assumed
-    assert compiled_features() == frozenset()
-    monkeypatch.setenv("NUMBA_CPU_NAME", "host")
-    assert compiled_features() == host
 
 
 def test_blas_threads_restored_after_overlapping_blocks_in_threads():

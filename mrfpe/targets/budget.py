@@ -22,6 +22,7 @@ from __future__ import annotations
 import itertools
 import os
 import re
+import threading
 from typing import Any
 
 __all__ = ["DEFAULT_FRACTION", "WORKING_CHUNK_BYTES", "MemoryBudgetError", "check_memory",
@@ -34,7 +35,28 @@ WORKING_CHUNK_BYTES = 64 << 20
 _ENV = "MRFPE_MEMORY_BUDGET"
 _UNITS = {"": 1, "B": 1, "KB": 10**3, "MB": 10**6, "GB": 10**9, "TB": 10**12,
           "KIB": 1 << 10, "MIB": 1 << 20, "GIB": 1 << 30, "TIB": 1 << 40}
-_budget: int | None = None
+
+
+class _ExplicitBudget:
+    """The budget set by :func:`set_memory_budget`: one value for the whole process (like
+    numba's thread count), read and swapped under a lock so that threads see whole values."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._value: int | None = None
+
+    def get(self) -> int | None:
+        with self._lock:
+            return self._value
+
+    def swap(self, value: int | None) -> int | None:
+        """Set ``value``; return the previous one."""
+        with self._lock:
+            old, self._value = self._value, value
+            return old
+
+
+_EXPLICIT = _ExplicitBudget()
 
 
 class MemoryBudgetError(MemoryError, ValueError):
@@ -84,8 +106,9 @@ def parse_bytes(value: Any, name: str = "memory budget") -> int:
 
 def memory_budget() -> int:
     """The current budget in bytes (see the module docstring for where it comes from)."""
-    if _budget is not None:
-        return _budget
+    explicit = _EXPLICIT.get()
+    if explicit is not None:
+        return explicit
     env = os.environ.get(_ENV)
     if env:
         return parse_bytes(env, _ENV)
@@ -98,10 +121,7 @@ def set_memory_budget(value: Any) -> int | None:
     Returns the previous explicit setting (None if there was none), so that
     ``old = set_memory_budget("1GB"); ...; set_memory_budget(old)`` restores it.
     """
-    global _budget
-    old = _budget
-    _budget = None if value is None else parse_bytes(value, "value")
-    return old
+    return _EXPLICIT.swap(None if value is None else parse_bytes(value, "value"))
 
 
 def check_memory(nbytes: float, what: str, hint: str = "") -> None:

@@ -25,8 +25,9 @@ Two data terms share this form:
     evaluations per label instead of 6) but inconsistent with a renderer that
     averages over the pixel, so noise-free data do not give zero energy.
 
-The tables are CSR-like arrays sorted by node (see :mod:`mrfpe.targets.kernels`)
-and :meth:`DataTables.subset` extracts a sub-lattice's rows without touching
+The tables are CSR-like arrays sorted by node (:class:`mrfpe.engine.tables.DataTables`,
+re-exported here; :mod:`mrfpe.engine.classic` explains the layout) and
+:meth:`DataTables.subset` extracts a sub-lattice's rows without touching
 any other node's entries. Geometry (3-D points, normals, light and view
 directions, irradiance) is computed by :func:`mrfpe.shading.triangle_geometry`
 with vertices in the lattice's order, exactly as the renderer does.
@@ -34,12 +35,9 @@ with vertices in the lattice's order, exactly as the renderer does.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
-from functools import cached_property
-from typing import Any
-
 import numpy as np
 
+from mrfpe.engine.tables import DataTables, chunk_bounds
 from mrfpe.shading import shading_features, triangle_geometry
 from mrfpe.targets import reflectance
 
@@ -50,97 +48,6 @@ DATA_TERMS = ("pixel", "triplet")
 #: Triangles whose geometry is computed per numpy batch at construction
 #: (bounds the construction's peak memory).
 _GEOM_BATCH = 131072
-#: Variable-triangle entries per parallel chunk (features of a chunk stay in L2).
-_CHUNK_ENTRIES = 4096
-
-
-@dataclass(frozen=True)
-class DataTables:
-    """Data-energy tables of a set of nodes (all arrays indexed by *local* node).
-
-    Attributes
-    ----------
-    nodes : (n,) int64
-        Global node ids (lattice numbering), ascending.
-    slot_ptr : (n + 1,) int64
-    slot_y, slot_w : (n_slots,) float64
-    slot_nvar : (n_slots,) int64
-    fix_feat : (5, n_slots) float64
-        Separable features of each slot's fixed triangle (zero if none).
-    var_ptr : (n + 1,) int64
-    var_feat : (5, n_var_entries) float64
-        Features of node ``i``'s ``t``-th variable triangle at label ``s`` in
-        column ``var_ptr[i] + t * B + s`` (structure of arrays).
-    n_labels : int
-    data_term : str
-    """
-
-    nodes: np.ndarray
-    slot_ptr: np.ndarray
-    slot_y: np.ndarray
-    slot_w: np.ndarray
-    slot_nvar: np.ndarray
-    fix_feat: np.ndarray
-    var_ptr: np.ndarray
-    var_feat: np.ndarray
-    n_labels: int
-    data_term: str
-
-    @property
-    def n_nodes(self) -> int:
-        return int(self.nodes.shape[0])
-
-    @property
-    def nbytes(self) -> int:
-        return int(sum(getattr(self, f).nbytes for f in (
-            "nodes", "slot_ptr", "slot_y", "slot_w", "slot_nvar", "fix_feat", "var_ptr",
-            "var_feat")))
-
-    @cached_property  # read on every log_prob call; the tables never change
-    def brdf_evals_per_particle(self) -> int:
-        """Triangle radiances one particle costs: variable entries + fixed triangles."""
-        return int(self.var_feat.shape[1] + np.count_nonzero(self.slot_nvar == 1)
-                   * (self.data_term == "pixel"))
-
-    def astype(self, dtype: Any) -> DataTables:
-        """The tables with the floating-point arrays (intensities, weights, features) cast."""
-        return replace(self, slot_y=self.slot_y.astype(dtype), slot_w=self.slot_w.astype(dtype),
-                       fix_feat=self.fix_feat.astype(dtype), var_feat=self.var_feat.astype(dtype))
-
-    def subset(self, local: np.ndarray) -> DataTables:
-        """Tables restricted to the nodes at local indices ``local`` (ascending)."""
-        local = np.asarray(local, dtype=np.int64)
-        sptr, sidx = _gather(self.slot_ptr, local)
-        vptr, vidx = _gather(self.var_ptr, local)
-        return DataTables(
-            nodes=self.nodes[local], slot_ptr=sptr, slot_y=self.slot_y[sidx],
-            slot_w=self.slot_w[sidx], slot_nvar=self.slot_nvar[sidx],
-            fix_feat=np.ascontiguousarray(self.fix_feat[:, sidx]), var_ptr=vptr,
-            var_feat=np.ascontiguousarray(self.var_feat[:, vidx]),
-            n_labels=self.n_labels, data_term=self.data_term)
-
-
-def _gather(ptr: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """New CSR pointer and flat row indices of the rows of ``idx`` (no Python loop)."""
-    counts = ptr[idx + 1] - ptr[idx]
-    new = np.zeros(idx.shape[0] + 1, dtype=np.int64)
-    np.cumsum(counts, out=new[1:])
-    flat = np.repeat(ptr[idx] - new[:-1], counts) + np.arange(new[-1], dtype=np.int64)
-    return new, flat
-
-
-def chunk_bounds(var_ptr: np.ndarray, entries: int = _CHUNK_ENTRIES) -> np.ndarray:
-    """Node ranges of the kernel's parallel chunks: about ``entries`` variable entries each.
-
-    Depends only on the tables, never on the machine, so sums are reproducible.
-    """
-    n = var_ptr.shape[0] - 1
-    if n == 0:
-        return np.zeros(1, dtype=np.int64)
-    total = int(var_ptr[-1])
-    n_chunks = max(1, -(-total // entries))
-    cuts = np.searchsorted(var_ptr, np.arange(1, n_chunks) * (total / n_chunks))
-    return np.unique(np.concatenate([[0], cuts, [n]])).astype(np.int64)
 
 
 def _separable_geometry(model, tri_pts: np.ndarray, scene) -> np.ndarray:
@@ -155,69 +62,64 @@ def _separable_geometry(model, tri_pts: np.ndarray, scene) -> np.ndarray:
     return out
 
 
-def build_tables(scene, data_term: str = "pixel", *, progress: bool = False) -> DataTables:
-    """Data-energy tables of every node of ``scene`` for ``scene.brdf``.
+def _pixel_slots(scene, Q: np.ndarray) -> tuple:
+    """The pixel form's slots: one per pixel touching a node (module docstring).
 
-    Parameters
-    ----------
-    scene : mrfpe.scene.Scene
-    data_term : "pixel" | "triplet"
-        See the module docstring.
-    progress : bool
-        Show a tqdm bar over the variable triangles' geometry batches.
+    Returns ``(slot_node, slot_y, slot_w, slot_nvar, fix_feat, vs, var_nodes, var_pos)``:
+    per slot its node, intensity, weight, variable-triangle count and fixed triangle's
+    features; per variable triangle its slot ``vs``, vertices and the node's vertex position.
     """
-    if data_term not in DATA_TERMS:
-        raise ValueError(f"data_term must be one of {DATA_TERMS}; got {data_term!r}")
-    model = scene.model
     lat = scene.lattice
-    n_nodes = lat.n_nodes
+    img = scene.image.reshape(-1)
+    indptr, pix = lat.node_pixels
+    slot_node = np.repeat(np.arange(lat.n_nodes, dtype=np.int64), np.diff(indptr))
+    slot_pix = np.asarray(pix, dtype=np.int64)
+    n_slots = slot_node.shape[0]
+    tris = np.stack([2 * slot_pix, 2 * slot_pix + 1], axis=1)  # (n_slots, 2)
+    tri_nodes = lat.triangles[tris]  # (n_slots, 2, 3)
+    hit = tri_nodes == slot_node[:, None, None]
+    contains = hit.any(axis=2)  # (n_slots, 2)
+    slot_nvar = contains.sum(axis=1).astype(np.int64)
+    slot_y = img[slot_pix]
+    slot_w = np.full(n_slots, 0.5)
+    # Fixed triangle: the one of a pixel's two that does not contain the node.
+    fixed_slot = np.flatnonzero(slot_nvar == 1)
+    fixed_tri = np.where(contains[fixed_slot, 0], 1, 0)
+    fix_nodes = tri_nodes[fixed_slot, fixed_tri]  # (n_fixed, 3)
+    fix_feat = np.zeros((5, n_slots))
+    if fixed_slot.size:
+        fix_feat[:, fixed_slot] = _separable_geometry(scene.model, Q[fix_nodes], scene).T
+    vs, vt = np.nonzero(contains)  # row-major: sorted by slot, then triangle
+    var_nodes = tri_nodes[vs, vt]  # (n_var, 3)
+    var_pos = np.argmax(hit[vs, vt], axis=1)
+    return slot_node, slot_y, slot_w, slot_nvar, fix_feat, vs, var_nodes, var_pos
+
+
+def _triplet_slots(scene) -> tuple:
+    """The triplet form's slots: one per clique centred on a node; as :func:`_pixel_slots`."""
+    lat = scene.lattice
+    img = scene.image.reshape(-1)
+    order = lat.node_cliques[1]
+    cl = lat.cliques[order]
+    slot_node = cl[:, 0].astype(np.int64)
+    n_slots = slot_node.shape[0]
+    slot_y = img[lat.clique_pixel[order]]
+    slot_w = np.ones(n_slots)
+    slot_nvar = np.ones(n_slots, dtype=np.int64)
+    fix_feat = np.zeros((5, n_slots))
+    vs = np.arange(n_slots, dtype=np.int64)
+    var_nodes = cl.astype(np.int64)
+    var_pos = np.zeros(n_slots, dtype=np.int64)
+    return slot_node, slot_y, slot_w, slot_nvar, fix_feat, vs, var_nodes, var_pos
+
+
+def _variable_features(scene, Q: np.ndarray, var_node: np.ndarray, var_nodes: np.ndarray,
+                       var_pos: np.ndarray, progress: bool) -> tuple[np.ndarray, np.ndarray]:
+    """``var_ptr`` and ``var_feat`` of the variable triangles (vertices at observed points,
+    the node's own vertex at each label), in node order."""
+    n_nodes = scene.lattice.n_nodes
     B = scene.n_labels
     P = np.asarray(scene.label_points()).reshape(n_nodes, B, 3)
-    Q = np.asarray(scene.observed_points()).reshape(n_nodes, 3)
-    img = scene.image.reshape(-1)
-
-    if data_term == "pixel":
-        indptr, pix = lat.node_pixels
-        slot_node = np.repeat(np.arange(n_nodes, dtype=np.int64), np.diff(indptr))
-        slot_pix = np.asarray(pix, dtype=np.int64)
-        n_slots = slot_node.shape[0]
-        tris = np.stack([2 * slot_pix, 2 * slot_pix + 1], axis=1)  # (n_slots, 2)
-        tri_nodes = lat.triangles[tris]  # (n_slots, 2, 3)
-        hit = tri_nodes == slot_node[:, None, None]
-        contains = hit.any(axis=2)  # (n_slots, 2)
-        slot_nvar = contains.sum(axis=1).astype(np.int64)
-        slot_y = img[slot_pix]
-        slot_w = np.full(n_slots, 0.5)
-        # Fixed triangle: the one of a pixel's two that does not contain the node.
-        fixed_slot = np.flatnonzero(slot_nvar == 1)
-        fixed_tri = np.where(contains[fixed_slot, 0], 1, 0)
-        fix_nodes = tri_nodes[fixed_slot, fixed_tri]  # (n_fixed, 3)
-        fix_feat = np.zeros((5, n_slots))
-        if fixed_slot.size:
-            fix_feat[:, fixed_slot] = _separable_geometry(model, Q[fix_nodes], scene).T
-        vs, vt = np.nonzero(contains)  # row-major: sorted by slot, then triangle
-        var_nodes = tri_nodes[vs, vt]  # (n_var, 3)
-        var_pos = np.argmax(hit[vs, vt], axis=1)
-    else:
-        indptr, order = lat.node_cliques
-        cl = lat.cliques[order]
-        slot_node = cl[:, 0].astype(np.int64)
-        n_slots = slot_node.shape[0]
-        slot_y = img[lat.clique_pixel[order]]
-        slot_w = np.ones(n_slots)
-        slot_nvar = np.ones(n_slots, dtype=np.int64)
-        fix_feat = np.zeros((5, n_slots))
-        vs = np.arange(n_slots, dtype=np.int64)
-        var_nodes = cl.astype(np.int64)
-        var_pos = np.zeros(n_slots, dtype=np.int64)
-
-    slot_ptr = np.zeros(n_nodes + 1, dtype=np.int64)
-    np.cumsum(np.bincount(slot_node, minlength=n_nodes), out=slot_ptr[1:])
-    if np.any(np.diff(slot_ptr) > 8):
-        raise ValueError("a node has more than 8 data-term slots; the kernel supports 8")
-
-    # Variable triangles: vertices at observed points, the node's own vertex at each label.
-    var_node = slot_node[vs]
     n_var = var_node.shape[0]
     nv = np.bincount(var_node, minlength=n_nodes).astype(np.int64)
     first = np.zeros(n_nodes + 1, dtype=np.int64)
@@ -237,13 +139,39 @@ def build_tables(scene, data_term: str = "pixel", *, progress: bool = False) -> 
         pts = np.repeat(Q[var_nodes[sl]][:, None], B, axis=1)  # (m, B, 3, 3)
         m = pts.shape[0]
         pts[np.arange(m)[:, None], labels[None, :], var_pos[sl][:, None]] = P[var_node[sl]]
-        feats = _separable_geometry(model, pts.reshape(m * B, 3, 3), scene)
+        feats = _separable_geometry(scene.model, pts.reshape(m * B, 3, 3), scene)
         var_feat[:, dest[sl].reshape(-1)] = feats.T
+    return var_ptr, var_feat
 
+
+def build_tables(scene, data_term: str = "pixel", *, progress: bool = False) -> DataTables:
+    """Data-energy tables of every node of ``scene`` for ``scene.brdf``.
+
+    Parameters
+    ----------
+    scene : mrfpe.scene.Scene
+    data_term : "pixel" | "triplet"
+        See the module docstring.
+    progress : bool
+        Show a tqdm bar over the variable triangles' geometry batches.
+    """
+    if data_term not in DATA_TERMS:
+        raise ValueError(f"data_term must be one of {DATA_TERMS}; got {data_term!r}")
+    n_nodes = scene.lattice.n_nodes
+    Q = np.asarray(scene.observed_points()).reshape(n_nodes, 3)
+    slots = _pixel_slots(scene, Q) if data_term == "pixel" else _triplet_slots(scene)
+    slot_node, slot_y, slot_w, slot_nvar, fix_feat, vs, var_nodes, var_pos = slots
+
+    slot_ptr = np.zeros(n_nodes + 1, dtype=np.int64)
+    np.cumsum(np.bincount(slot_node, minlength=n_nodes), out=slot_ptr[1:])
+    if np.any(np.diff(slot_ptr) > 8):
+        raise ValueError("a node has more than 8 data-term slots; the kernel supports 8")
+    var_ptr, var_feat = _variable_features(scene, Q, slot_node[vs], var_nodes, var_pos,
+                                           progress)
     return DataTables(
         nodes=np.arange(n_nodes, dtype=np.int64), slot_ptr=slot_ptr, slot_y=slot_y,
         slot_w=slot_w, slot_nvar=slot_nvar, fix_feat=fix_feat, var_ptr=var_ptr,
-        var_feat=var_feat, n_labels=B, data_term=data_term)
+        var_feat=var_feat, n_labels=scene.n_labels, data_term=data_term)
 
 
 def energies_reference(tables: DataTables, coef: np.ndarray, sigma_b: float) -> np.ndarray:

@@ -1,7 +1,7 @@
 """Analytic Jacobians of the per-node terms and residuals of the BRDF pseudolikelihood family.
 
 For Levenberg-Marquardt (7.3.2, ``lm_multiseed``): one kernel pass over the
-lean template tables (:mod:`mrfpe.targets.lean`) gives, for one particle, every
+lean template tables (:mod:`mrfpe.engine.gradient`) gives, for one particle, every
 node's term ``l_i`` and its derivatives with respect to the five separable-form
 coefficients ``c = (c0, c1, c2, e1, e2)``:
 
@@ -29,251 +29,22 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from numba import njit, prange
 
-from mrfpe.targets.kernels import _FM
-from mrfpe.targets.lean import (
-    LOG2E,
-    NODE_BLOCK,
-    exp2_64,
-    label_rows_full,
-    label_rows_ward,
-    lean_tables,
-    lean_tables_t,
-)
+from mrfpe.engine.fastmath import LOG2E
+from mrfpe.engine.gradient import grad_nodes
 from mrfpe.threads import thread_budget
 
 __all__ = ["node_terms_and_jacobian", "node_terms_and_jacobians", "residuals_and_jacobian",
            "residuals_and_jacobians", "supports"]
 
-_LN2 = 0.6931471805599453
 _COEF_STEP = 1e-6  # central differences of the coefficient map (unit cube)
-
-
-@njit(inline="always", fastmath=_FM, error_model="numpy", cache=True)
-def _sgn(t):
-    return (t > 0) * 1.0 - (t < 0) * 1.0
-
-
-@njit(parallel=True, fastmath=_FM, error_model="numpy", cache=True)
-def _grad_nodes(coef, full, iso, recT, nrecT, unaryT, obs, inv_sigma, n, a, b,
-                out_val, out_grad):  # pragma: no cover - compiled
-    """Node terms ``out_val`` (K, n) and ``dl/dc`` ``out_grad`` (K, n, 5) of K particles.
-
-    ``iso``: :attr:`~mrfpe.targets.lean.LeanTables.isotropic` (every ``G2 = 0``), where
-    ``dl/de2`` is 0 whatever ``e2`` and the ``G2`` rows are not read (the same numbers, up
-    to the sign of that zero).
-
-    Blocks of ``NODE_BLOCK`` nodes are the SIMD lanes, on the node-major tables
-    (:func:`mrfpe.targets.lean.lean_tables_t`), as in
-    :func:`~mrfpe.targets.lean.lean_terms_nodes` for the values, so the loops do not
-    depend on the label count; ``unaryT`` and ``inv_sigma`` in log2 units, ``coef``
-    (5, K) float64 with ``e1, e2`` times log2 e; float64 whatever the tables' precision.
-    Each block runs its particles one after another, so a block's tables are read from
-    memory once for all K (from L2 after the first), and every particle's numbers are
-    the same whatever K.
-    Rows are bound as 1-D slices indexed from 0 (unit strides, no negative-index
-    wraparound), so numba's code loads vectors, not gathers.
-    """
-    B = unaryT.shape[0]
-    K = coef.shape[1]
-    af = float(a)
-    bf = float(b)
-    isg = float(inv_sigma)
-    isn = -isg * _LN2  # -1 / sigma_b: derivatives in natural units
-    NB = NODE_BLOCK
-    for blk in prange(-(-n // NB)):
-        i0 = blk * NB
-        i1 = min(i0 + NB, n)
-        m = i1 - i0
-        sl = slice(i0, i1)
-        en = np.empty((B, NB))
-        g = np.empty((5, B, NB))
-        mn = np.empty(NB)
-        tot = np.empty(NB)
-        acc = np.empty(NB)
-        eo = np.empty(NB)
-        ha1, ha2, hb1, hb2 = np.empty(NB), np.empty(NB), np.empty(NB), np.empty(NB)
-        wa1, wa2, wb1, wb2 = np.empty(NB), np.empty(NB), np.empty(NB), np.empty(NB)
-        y0, y1, y2, y3 = nrecT[0, sl], nrecT[1, sl], nrecT[2, sl], nrecT[3, sl]
-        # LLVM vectorised these loops only with at most four store streams each (module
-        # docstring), so the full form's label loop is split in four:
-        # the exponentials in two halves, then the energy with dE/dc0..c2, then dE/de1, e2.
-        for q in range(K):  # the block's tables stay in L2 across the particles
-            C0, C1, C2, E1, E2 = coef[0, q], coef[1, q], coef[2, q], coef[3, q], coef[4, q]
-            if full:
-                na1, nga1, na2, nga2 = nrecT[4, sl], nrecT[5, sl], nrecT[6, sl], nrecT[7, sl]
-                nb1, ngb1, nb2, ngb2 = nrecT[8, sl], nrecT[9, sl], nrecT[10, sl], nrecT[11, sl]
-                for j in range(m):
-                    xa = exp2_64(E1 * nga1[j] + E2 * nga2[j])
-                    ha1[j], ha2[j] = na1[j] * xa, na2[j] * xa
-                for j in range(m):
-                    xb = exp2_64(E1 * ngb1[j] + E2 * ngb2[j])
-                    hb1[j], hb2[j] = nb1[j] * xb, nb2[j] * xb
-                for j in range(m):
-                    qa = C1 * ha1[j] + C2 * ha2[j]
-                    qb = C1 * hb1[j] + C2 * hb2[j]
-                    wa1[j], wa2[j] = qa * nga1[j], qa * nga2[j]
-                    wb1[j], wb2[j] = qb * ngb1[j], qb * ngb2[j]
-                xs = np.empty((6, NB))  # one label's triangle exponentials
-                x0, x1, x2, x3, x4, x5 = xs[0], xs[1], xs[2], xs[3], xs[4], xs[5]
-                for s in range(B):
-                    (u, a0, a1, a2, a3, f01, g01, f02, g02, f11, g11, f12, g12, f21, g21, f22, g22,
-                     f31, g31, f32, g32, f41, g41, f42, g42, f51, g51, f52,
-                     g52) = label_rows_full(recT, unaryT, s, sl)
-                    es, g0s, g1s, g2s, g3s, g4s = en[s], g[0, s], g[1, s], g[2, s], g[3, s], g[4, s]
-                    if iso:  # E1 G1 + 0 G2 is E1 G1 exactly: the G2 rows stay unread
-                        for j in range(m):
-                            x0[j] = exp2_64(E1 * g01[j])
-                            x1[j] = exp2_64(E1 * g11[j])
-                            x2[j] = exp2_64(E1 * g21[j])
-                        for j in range(m):
-                            x3[j] = exp2_64(E1 * g31[j])
-                            x4[j] = exp2_64(E1 * g41[j])
-                            x5[j] = exp2_64(E1 * g51[j])
-                    else:
-                        for j in range(m):
-                            x0[j] = exp2_64(E1 * g01[j] + E2 * g02[j])
-                            x1[j] = exp2_64(E1 * g11[j] + E2 * g12[j])
-                            x2[j] = exp2_64(E1 * g21[j] + E2 * g22[j])
-                        for j in range(m):
-                            x3[j] = exp2_64(E1 * g31[j] + E2 * g32[j])
-                            x4[j] = exp2_64(E1 * g41[j] + E2 * g42[j])
-                            x5[j] = exp2_64(E1 * g51[j] + E2 * g52[j])
-                    for j in range(m):
-                        s10 = f01[j] * x0[j] + f11[j] * x1[j]
-                        s20 = f02[j] * x0[j] + f12[j] * x1[j]
-                        s11 = f21[j] * x2[j] + f31[j] * x3[j]
-                        s21 = f22[j] * x2[j] + f32[j] * x3[j]
-                        s12 = ha1[j] + f41[j] * x4[j]
-                        s22 = ha2[j] + f42[j] * x4[j]
-                        s13 = hb1[j] + f51[j] * x5[j]
-                        s23 = hb2[j] + f52[j] * x5[j]
-                        t0 = y0[j] - C0 * a0[j] - C1 * s10 - C2 * s20
-                        t1 = y1[j] - C0 * a1[j] - C1 * s11 - C2 * s21
-                        t2 = y2[j] - C0 * a2[j] - C1 * s12 - C2 * s22
-                        t3 = y3[j] - C0 * a3[j] - C1 * s13 - C2 * s23
-                        k0, k1, k2, k3 = _sgn(t0), _sgn(t1), _sgn(t2), _sgn(t3)
-                        es[j] = u[j] + isg * (abs(t0) + abs(t1) + abs(t2) + abs(t3))
-                        g0s[j] = isn * (k0 * a0[j] + k1 * a1[j] + k2 * a2[j] + k3 * a3[j])
-                        g1s[j] = isn * (k0 * s10 + k1 * s11 + k2 * s12 + k3 * s13)
-                        g2s[j] = isn * (k0 * s20 + k1 * s21 + k2 * s22 + k3 * s23)
-                    if iso:  # dE/de1 without the G2 rows; dE/de2 = 0 (below)
-                        for j in range(m):
-                            q0 = (C1 * f01[j] + C2 * f02[j]) * x0[j]
-                            q1 = (C1 * f11[j] + C2 * f12[j]) * x1[j]
-                            q2 = (C1 * f21[j] + C2 * f22[j]) * x2[j]
-                            q3 = (C1 * f31[j] + C2 * f32[j]) * x3[j]
-                            q4 = (C1 * f41[j] + C2 * f42[j]) * x4[j]
-                            q5 = (C1 * f51[j] + C2 * f52[j]) * x5[j]
-                            t0 = (y0[j] - C0 * a0[j] - C1 * (f01[j] * x0[j] + f11[j] * x1[j])
-                                  - C2 * (f02[j] * x0[j] + f12[j] * x1[j]))
-                            t1 = (y1[j] - C0 * a1[j] - C1 * (f21[j] * x2[j] + f31[j] * x3[j])
-                                  - C2 * (f22[j] * x2[j] + f32[j] * x3[j]))
-                            t2 = (y2[j] - C0 * a2[j] - C1 * (ha1[j] + f41[j] * x4[j])
-                                  - C2 * (ha2[j] + f42[j] * x4[j]))
-                            t3 = (y3[j] - C0 * a3[j] - C1 * (hb1[j] + f51[j] * x5[j])
-                                  - C2 * (hb2[j] + f52[j] * x5[j]))
-                            k0, k1, k2, k3 = _sgn(t0), _sgn(t1), _sgn(t2), _sgn(t3)
-                            g3s[j] = isn * (k0 * (q0 * g01[j] + q1 * g11[j])
-                                            + k1 * (q2 * g21[j] + q3 * g31[j])
-                                            + k2 * (wa1[j] + q4 * g41[j])
-                                            + k3 * (wb1[j] + q5 * g51[j]))
-                        continue
-                    for j in range(m):
-                        q0 = (C1 * f01[j] + C2 * f02[j]) * x0[j]
-                        q1 = (C1 * f11[j] + C2 * f12[j]) * x1[j]
-                        q2 = (C1 * f21[j] + C2 * f22[j]) * x2[j]
-                        q3 = (C1 * f31[j] + C2 * f32[j]) * x3[j]
-                        q4 = (C1 * f41[j] + C2 * f42[j]) * x4[j]
-                        q5 = (C1 * f51[j] + C2 * f52[j]) * x5[j]
-                        t0 = (y0[j] - C0 * a0[j] - C1 * (f01[j] * x0[j] + f11[j] * x1[j])
-                              - C2 * (f02[j] * x0[j] + f12[j] * x1[j]))
-                        t1 = (y1[j] - C0 * a1[j] - C1 * (f21[j] * x2[j] + f31[j] * x3[j])
-                              - C2 * (f22[j] * x2[j] + f32[j] * x3[j]))
-                        t2 = (y2[j] - C0 * a2[j] - C1 * (ha1[j] + f41[j] * x4[j])
-                              - C2 * (ha2[j] + f42[j] * x4[j]))
-                        t3 = (y3[j] - C0 * a3[j] - C1 * (hb1[j] + f51[j] * x5[j])
-                              - C2 * (hb2[j] + f52[j] * x5[j]))
-                        k0, k1, k2, k3 = _sgn(t0), _sgn(t1), _sgn(t2), _sgn(t3)
-                        g3s[j] = isn * (k0 * (q0 * g01[j] + q1 * g11[j])
-                                        + k1 * (q2 * g21[j] + q3 * g31[j])
-                                        + k2 * (wa1[j] + q4 * g41[j]) + k3 * (wb1[j] + q5 * g51[j]))
-                        g4s[j] = isn * (k0 * (q0 * g02[j] + q1 * g12[j])
-                                        + k1 * (q2 * g22[j] + q3 * g32[j])
-                                        + k2 * (wa2[j] + q4 * g42[j]) + k3 * (wb2[j] + q5 * g52[j]))
-            else:
-                na, nga, nb, ngb = nrecT[4, sl], nrecT[5, sl], nrecT[6, sl], nrecT[7, sl]
-                for j in range(m):
-                    ha1[j] = exp2_64(E1 * nga[j] + na[j])  # the Ward tables hold log2 wF1
-                    hb1[j] = exp2_64(E1 * ngb[j] + nb[j])
-                    wa1[j] = ha1[j] * nga[j]
-                    wb1[j] = hb1[j] * ngb[j]
-                for s in range(B):
-                    (u, a0, a1, a2, a3, f0, e0, f1, e1, f2, e2, f3, e3, f4, e4, f5,
-                     e5) = label_rows_ward(recT, unaryT, s, sl)
-                    es, g0s, g1s, g3s = en[s], g[0, s], g[1, s], g[3, s]  # dE/dc2, e2 = 0
-                    for j in range(m):
-                        p0 = exp2_64(E1 * e0[j] + f0[j])
-                        p1 = exp2_64(E1 * e1[j] + f1[j])
-                        p2 = exp2_64(E1 * e2[j] + f2[j])
-                        p3 = exp2_64(E1 * e3[j] + f3[j])
-                        p4 = exp2_64(E1 * e4[j] + f4[j])
-                        p5 = exp2_64(E1 * e5[j] + f5[j])
-                        s10 = p0 + p1
-                        s11 = p2 + p3
-                        s12 = ha1[j] + p4
-                        s13 = hb1[j] + p5
-                        t0 = y0[j] - C0 * a0[j] - C1 * s10
-                        t1 = y1[j] - C0 * a1[j] - C1 * s11
-                        t2 = y2[j] - C0 * a2[j] - C1 * s12
-                        t3 = y3[j] - C0 * a3[j] - C1 * s13
-                        k0, k1, k2, k3 = _sgn(t0), _sgn(t1), _sgn(t2), _sgn(t3)
-                        es[j] = u[j] + isg * (abs(t0) + abs(t1) + abs(t2) + abs(t3))
-                        g0s[j] = isn * (k0 * a0[j] + k1 * a1[j] + k2 * a2[j] + k3 * a3[j])
-                        g1s[j] = isn * (k0 * s10 + k1 * s11 + k2 * s12 + k3 * s13)
-                        g3s[j] = isn * C1 * (k0 * (p0 * e0[j] + p1 * e1[j])
-                                             + k1 * (p2 * e2[j] + p3 * e3[j])
-                                             + k2 * (wa1[j] + p4 * e4[j])
-                                             + k3 * (wb1[j] + p5 * e5[j]))
-            for j in range(m):
-                mn[j] = en[0, j]
-                tot[j] = 0.0
-                eo[j] = en[obs[i0 + j], j]  # before en turns into weights
-            for s in range(1, B):
-                es = en[s]
-                for j in range(m):
-                    mn[j] = min(mn[j], es[j])
-            for s in range(B):  # en becomes the label weights 2^(m - E): the softmax numerators
-                es = en[s]
-                for j in range(m):
-                    es[j] = exp2_64(mn[j] - es[j])
-                    tot[j] += es[j]
-            for j in range(m):
-                out_val[q, i0 + j] = _LN2 * (af * -eo[j] - bf * mn[j]) + bf * np.log(tot[j])
-            for k in range(5):
-                if (not full and k == 2) or ((not full or iso) and k == 4):
-                    for j in range(m):
-                        out_grad[q, i0 + j, k] = 0.0
-                    continue
-                for j in range(m):
-                    acc[j] = 0.0
-                for s in range(B):
-                    es = en[s]
-                    gk = g[k, s]
-                    for j in range(m):
-                        acc[j] += es[j] * gk[j]
-                for j in range(m):
-                    out_grad[q, i0 + j, k] = -af * g[k, obs[i0 + j], j] - bf * acc[j] / tot[j]
 
 
 def supports(target: Any) -> bool:
     """Whether ``target`` has the tables this module differentiates (the lean template)."""
-    t = getattr(target, "_tables", None)
-    model = getattr(target, "model", None)
-    if t is None or model is None or not hasattr(target, "_unary_e"):
-        return False
-    return lean_tables(t, model.name not in ("lambertian", "ward")) is not None
+    tables = getattr(target, "_engine_tables", None)
+    return tables is not None and getattr(target, "model", None) is not None and \
+        tables.lean is not None
 
 
 def _coefficients_and_jacobian(model: Any, to_natural: Any,
@@ -311,13 +82,11 @@ def node_terms_and_jacobians(target: Any, thetas: np.ndarray) -> tuple[np.ndarra
     particle alike whatever K), at a fraction of its cost per point from K of a few
     on: the pass reads the tables once for all K.
     """
-    from mrfpe.targets.dispatch import _log2_units
-
     thetas = np.atleast_2d(np.asarray(thetas, dtype=np.float64))
     model = target.model
     full = model.name not in ("lambertian", "ward")
-    t = target._tables
-    lt = lean_tables(t, full)
+    tables = target._engine_tables
+    t, lt = tables.data, tables.lean
     pairs = [_coefficients_and_jacobian(model, target.to_natural, th) for th in thetas]
     ck = np.array([c for c, _ in pairs]).T.copy()  # (5, K)
     ck[3:] *= LOG2E
@@ -326,11 +95,9 @@ def node_terms_and_jacobians(target: Any, thetas: np.ndarray) -> tuple[np.ndarra
     grad = np.empty((k, n, 5))
     if n:
         with thread_budget(t.brdf_evals_per_particle * k):  # as k residual rows
-            ltt = lean_tables_t(lt)
-            _grad_nodes(ck, full, lt.isotropic, ltt.recT, ltt.nrecT,
-                        _log2_units(target._unary_e, transposed=True), target._obs,
-                        LOG2E / target.sigma_b, n, float(target._a), float(target._b),
-                        val, grad)
+            grad_nodes(ck, full, lt.isotropic, lt.recT, lt.nrecT, tables.unary_log2_t,
+                       tables.obs, LOG2E / target.sigma_b, n, float(target._a), float(target._b),
+                       val, grad)
     jac = np.stack([grad[q] @ dc for q, (_, dc) in enumerate(pairs)])  # row by row, as K = 1
     return val + target._const, jac
 

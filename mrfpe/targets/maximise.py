@@ -170,8 +170,34 @@ def maximise(target: Any, grid: int | Any = 20, *, seed: int | None = 0, n_start
     b = np.asarray(target.bounds, dtype=np.float64)
     if b.ndim != 2 or b.shape[1] != 2 or b.shape[0] < 1 or not np.all(np.isfinite(b)):
         raise ValueError(f"target.bounds must be a finite (d, 2) array; got {b.tolist()}")
-    d = b.shape[0]
     lo, hi = b[:, 0], b[:, 1]
+    seed = _check_arguments(method, seed, n_starts, n_random, max_iter, batch, xtol,
+                            pattern_xtol)
+    pts, spacing = _grid(b, grid)
+    f = _eval(target, pts, batch)
+    order = np.argsort(-f, kind="stable")
+    starts = pts[order[:n_starts]]
+    f0 = f[order[:n_starts]]
+    if n_random:
+        rng = np.random.default_rng(seed)
+        extra = lo + rng.random((n_random, b.shape[0])) * (hi - lo)
+        starts = np.vstack([starts, extra])
+        f0 = np.concatenate([f0, _eval(target, extra, batch)])
+    keep = np.isfinite(f0)
+    if not keep.any():
+        i = int(order[0])
+        return pts[i].copy(), float(f[i])
+    xs, fs = _refine(target, starts[keep], f0[keep], lo, hi, method, spacing, xtol,
+                     pattern_xtol, max_iter, batch)
+    j = int(np.argmax(fs))
+    if fs[j] >= f[order[0]]:
+        return xs[j].copy(), float(fs[j])
+    return pts[order[0]].copy(), float(f[order[0]])
+
+
+def _check_arguments(method: str, seed: Any, n_starts: Any, n_random: Any, max_iter: Any,
+                     batch: Any, xtol: Any, pattern_xtol: Any) -> int | None:
+    """Check :func:`maximise`'s arguments by name; return the checked seed."""
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}; got {method!r}")
     seed = check_seed(seed)
@@ -184,51 +210,40 @@ def maximise(target: Any, grid: int | Any = 20, *, seed: int | None = 0, n_start
     if not (isinstance(pattern_xtol, int | float) and np.isfinite(pattern_xtol)
             and pattern_xtol > 0):
         raise ValueError(f"pattern_xtol must be a positive number; got {pattern_xtol!r}")
+    return seed
+
+
+def _grid(b: np.ndarray, grid: Any) -> tuple[np.ndarray, float]:
+    """The grid's points in the bounds ``b`` (d, 2) and their spacing (unit-cube fraction)."""
+    d = b.shape[0]
     if isinstance(grid, int | np.integer) and not isinstance(grid, bool):
         if grid < 2:
             raise ValueError(f"grid must be >= 2 points per dimension; got {grid}")
         check_memory(8.0 * (d + 2) * float(grid) ** d,
                      f"a grid of {int(grid)}^{d} points", "use a coarser grid")
-        pts = grid_points(b, int(grid))
-        spacing = 1.0 / (int(grid) - 1)
-    else:
-        try:
-            pts = np.asarray(grid, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise ValueError(f"grid must be an integer >= 2 or an (M, {d}) array of points; "
-                             f"got {grid!r}") from None
-        if pts.ndim != 2 or pts.shape[1] != d or pts.shape[0] < 1 or not np.all(np.isfinite(pts)):
-            raise ValueError(f"grid must be an int or a finite (M, {d}) array; got shape "
-                             f"{pts.shape}")
-        pts = np.clip(pts, lo, hi)
-        spacing = 1.0 / max(2.0, round(pts.shape[0] ** (1.0 / d)))
+        return grid_points(b, int(grid)), 1.0 / (int(grid) - 1)
+    try:
+        pts = np.asarray(grid, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"grid must be an integer >= 2 or an (M, {d}) array of points; "
+                         f"got {grid!r}") from None
+    if pts.ndim != 2 or pts.shape[1] != d or pts.shape[0] < 1 or not np.all(np.isfinite(pts)):
+        raise ValueError(f"grid must be an int or a finite (M, {d}) array; got shape "
+                         f"{pts.shape}")
+    return np.clip(pts, b[:, 0], b[:, 1]), 1.0 / max(2.0, round(pts.shape[0] ** (1.0 / d)))
 
-    f = _eval(target, pts, batch)
-    order = np.argsort(-f, kind="stable")
-    starts = pts[order[:n_starts]]
-    f0 = f[order[:n_starts]]
-    if n_random:
-        rng = np.random.default_rng(seed)
-        extra = lo + rng.random((n_random, d)) * (hi - lo)
-        starts = np.vstack([starts, extra])
-        f0 = np.concatenate([f0, _eval(target, extra, batch)])
-    keep = np.isfinite(f0)
-    if not keep.any():
-        i = int(order[0])
-        return pts[i].copy(), float(f[i])
-    starts, f0 = starts[keep], f0[keep]
-    if method == "pattern":
-        xs, fs = _pattern(target, starts, f0, lo, hi, 0.5 * spacing, max(xtol, pattern_xtol),
-                          max_iter, batch)
-        # Compass steps stall at kinks that no search direction follows; a Nelder-Mead
-        # polish of the best point (its simplex adapts to the kink) finishes the job.
-        j = int(np.argmax(fs))
-        px, pf = _scipy(target, xs[j:j + 1], fs[j:j + 1], lo, hi, "nelder-mead", xtol,
-                        max_iter)
-        xs[j], fs[j] = px[0], pf[0]
-    else:
-        xs, fs = _scipy(target, starts, f0, lo, hi, method, xtol, max_iter)
+
+def _refine(target: Any, starts: np.ndarray, f0: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+            method: str, spacing: float, xtol: float, pattern_xtol: float, max_iter: int,
+            batch: int) -> tuple[np.ndarray, np.ndarray]:
+    """The local optimiser from each start: the refined points and their log_probs."""
+    if method != "pattern":
+        return _scipy(target, starts, f0, lo, hi, method, xtol, max_iter)
+    xs, fs = _pattern(target, starts, f0, lo, hi, 0.5 * spacing, max(xtol, pattern_xtol),
+                      max_iter, batch)
+    # Compass steps stall at kinks that no search direction follows; a Nelder-Mead
+    # polish of the best point (its simplex adapts to the kink) finishes the job.
     j = int(np.argmax(fs))
-    if fs[j] >= f[order[0]]:
-        return xs[j].copy(), float(fs[j])
-    return pts[order[0]].copy(), float(f[order[0]])
+    px, pf = _scipy(target, xs[j:j + 1], fs[j:j + 1], lo, hi, "nelder-mead", xtol, max_iter)
+    xs[j], fs[j] = px[0], pf[0]
+    return xs, fs

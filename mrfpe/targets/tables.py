@@ -3,7 +3,8 @@
 Building the tables is the expensive, theta-independent part of a BRDF
 target. Every target built on the same :class:`mrfpe.scene.Scene` object with
 the same data term and precision shares one set, held in a weak-keyed cache
-(it goes when the scene goes). A content fingerprint guards against scenes
+(it goes when the scene goes), and likewise the lean kernels' template tables
+(:func:`lean_tables_for`). A content fingerprint guards against scenes
 modified in place: stale tables are dropped and rebuilt.
 """
 
@@ -16,10 +17,11 @@ from typing import Any
 
 import numpy as np
 
+from mrfpe.engine import DataTables, LeanTables, lean_tables
 from mrfpe.targets.budget import check_memory
-from mrfpe.targets.energy import DataTables, build_tables
+from mrfpe.targets.energy import build_tables
 
-__all__ = ["estimate_table_bytes", "fingerprint", "tables_for"]
+__all__ = ["estimate_table_bytes", "fingerprint", "lean_tables_for", "tables_for"]
 
 _TABLE_CACHE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
@@ -73,4 +75,16 @@ def tables_for(scene: Any, data_term: str, dtype: str = "float64", *,
         else:
             per_scene[key] = tables_for(scene, data_term, "float64",
                                         progress=progress).astype(dtype)
+    return per_scene[key]
+
+
+def lean_tables_for(scene: Any, data_term: str, dtype: str, full: bool) -> LeanTables | None:
+    """The lean kernels' template tables (:func:`mrfpe.engine.lean_tables`) of
+    :func:`tables_for`'s tables, shared by every target on the same scene (None if
+    they do not fit the template)."""
+    data = tables_for(scene, data_term, dtype)
+    per_scene = _TABLE_CACHE[scene]
+    key = (data_term, dtype, fingerprint(scene), "lean", bool(full))
+    if key not in per_scene:
+        per_scene[key] = lean_tables(data, full)
     return per_scene[key]

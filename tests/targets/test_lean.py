@@ -1,4 +1,4 @@
-"""The lean kernel against today's (classic) kernel and the NumPy reference energies."""
+"""The lean kernels against the classic ones (the ``kernel`` option) and the NumPy reference."""
 
 from __future__ import annotations
 
@@ -12,11 +12,12 @@ from numba import njit
 from scipy.special import logsumexp
 
 from mrfpe import brdf as B
+from mrfpe.engine import kernel_family, lean_tables
+from mrfpe.engine.fastmath import fexp2
+from mrfpe.engine.lean import block_size
 from mrfpe.synthetic import make_scene
 from mrfpe.targets import get, reflectance
-from mrfpe.targets.dispatch import kernel_for, use_kernel
 from mrfpe.targets.energy import energies_reference
-from mrfpe.targets.lean import block_size, fexp2, lean_tables
 
 CASES = [("ward", [0.7, 0.4, 0.45], "smooth"), ("phong", [0.5, 0.4, 0.3], "jagged"),
          ("ward_aniso", [0.7, 0.4, 0.45, 0.3], "smooth"),
@@ -56,7 +57,7 @@ def test_exp2_accuracy_floor_and_unbiased_float32():
 
 _EXP2_BITS = """
 import numpy as np, numba
-from mrfpe.targets.lean import SCALEF, fexp2
+from mrfpe.engine.fastmath import SCALEF, fexp2
 @numba.njit(error_model="numpy")
 def m(x, out):
     for i in range(x.shape[0]):
@@ -71,8 +72,7 @@ print(SCALEF, o.view(np.int32).astype(np.int64).sum(), int(o.view(np.int32)[::99
 
 def test_exp2_scalings_give_the_same_bits():
     """AVX-512's vscalefps and the integer exponent add: same k, r and p, so the same bits."""
-    from mrfpe.targets.lean import SCALEF
-    from mrfpe.threads import compiled_features
+    from mrfpe.engine.fastmath import SCALEF, compiled_features
 
     assert SCALEF == ({"avx512f", "avx512vl"} <= compiled_features())
     env = {k: v for k, v in os.environ.items() if not k.startswith(("NUMBA_CPU", "MRFPE_"))}
@@ -86,8 +86,8 @@ def test_exp2_scalings_give_the_same_bits():
 
 
 def test_growing_exponents_go_to_the_classic_kernel():
-    from mrfpe.targets.dispatch import pl_terms  # noqa: F401  (the rule lives there)
-    from mrfpe.targets.lean import HI32, exponent_bound
+    from mrfpe.engine.fastmath import HI32
+    from mrfpe.engine.template import exponent_bound
 
     s = _scene("ward", [0.7, 0.4, 0.45], "smooth")
     t = get("pls", s, dtype="float32")
@@ -101,6 +101,13 @@ def test_growing_exponents_go_to_the_classic_kernel():
     assert np.isfinite(lt.log_f_max) and exponent_bound(lt, np.zeros((1, 2))) == lt.log_f_max
     lam = lean_tables(get("pls", _scene("lambertian", [0.7], "smooth"))._tables, False)
     assert lam.log_f_max == -np.inf  # no lobe at all: every weight is 0
+    # the per-call choice: growing exponents run the classic kernels, whatever the plan
+    coef = np.zeros((2, 5))
+    assert kernel_family(t._plan, t._engine_tables, coef) == "lean"
+    coef[1, 3] = 1e6
+    assert kernel_family(t._plan, t._engine_tables, coef) == "classic"
+    assert kernel_family(get("pls", s, kernel="classic")._plan, t._engine_tables,
+                         coef[:1]) == "classic"
 
 
 def _scene(brdf, u, surface, shape=(9, 11), n_labels=7, seed=3):
@@ -120,10 +127,11 @@ def test_float64_matches_classic_and_numpy_reference(brdf, u, surface, data_term
     x = np.vstack([_points(len(u)), np.array(u)])
     for name in ("pls", "pml", "fit"):
         t = get(name, s, data_term=data_term)
-        assert kernel_for(t._tables, brdf not in ("lambertian", "ward")) == "lean"
-        with use_kernel("classic"):
-            ref = t.node_terms(x)
-            ref_lp = t.log_prob(x)
+        assert t._plan.lean and t._plan.kernel == "lean"
+        tc = get(name, s, data_term=data_term, kernel="classic")
+        assert not tc._plan.lean
+        ref = tc.node_terms(x)
+        ref_lp = tc.log_prob(x)
         new = t.node_terms(x)
         # relative to the scale of the values (a noise-free fit at the truth is ~1e-13)
         tol = 1e-12 * np.max(np.abs(ref_lp))
@@ -150,8 +158,7 @@ def test_float32_within_2e6(brdf, u, surface):
     # differences that matter for sampling: between points, relative to their size
     d64, d32 = a[:, None] - a[None, :], b[:, None] - b[None, :]
     assert np.max(np.abs(d32 - d64)) <= 2e-6 * np.max(np.abs(a))
-    with use_kernel("classic"):
-        c = t32.log_prob(x)
+    c = get("pls", s, dtype="float32", kernel="classic").log_prob(x)
     np.testing.assert_allclose(b, c, rtol=2e-6)
     np.testing.assert_allclose(t32.log_prob(x[:2]), b[:2], rtol=1e-6)  # labels-SIMD kernel
     np.testing.assert_allclose(sum(p.log_prob(x[:20]) for p in t32.partition(3)), b[:20],
@@ -165,8 +172,8 @@ def test_partitions_forbidden_labels_and_threads():
     np.put_along_axis(bel, forbid[..., None], 0.0, axis=2)
     t = get("pl3", s, beliefs=bel / bel.sum(axis=2, keepdims=True))
     x = _points(3, 40)
-    with use_kernel("classic"):
-        ref = t.log_prob(x)
+    ref = get("pl3", s, beliefs=bel / bel.sum(axis=2, keepdims=True),
+              kernel="classic").log_prob(x)
     lp = t.log_prob(x)
     assert np.all(np.isfinite(lp))
     np.testing.assert_allclose(lp, ref, rtol=1e-12)
@@ -181,19 +188,19 @@ def test_partitions_forbidden_labels_and_threads():
         assert np.array_equal(t.log_prob(x), one)  # fixed chunk order
 
 
-def test_tables_cached_and_template_fallback():
+def test_tables_shared_read_only_and_the_kernel_option_checked():
     s = _scene("ward", [0.7, 0.4, 0.45], "smooth")
     t = get("pls", s)
-    assert lean_tables(t._tables, False) is lean_tables(t._tables, False)
-    with pytest.raises(ValueError, match="kernel must be"):
-        with use_kernel("fast"):
-            pass
+    assert get("pl", s)._engine_tables.lean is t._engine_tables.lean  # one per scene
+    assert not t._engine_tables.lean.rec.flags.writeable
+    with pytest.raises(ValueError, match="kernel must be one of 'lean', 'classic'"):
+        get("pls", s, kernel="fast")
     assert block_size(1000, 20, 4) % 16 == 0 and block_size(1, 40, 8) == 16
 
 
 @pytest.mark.parametrize("brdf,n", [("phong", 40), ("phong", 1000), ("ward", 300)])
 def test_values_do_not_depend_on_the_block(monkeypatch, brdf, n):
-    import mrfpe.targets.lean as lean
+    import mrfpe.engine.lean as lean
 
     t = get("pls", _scene(brdf, [0.5, 0.4, 0.3], "jagged"), dtype="float32")
     x = np.random.default_rng(3).random((n, 3))
@@ -207,7 +214,7 @@ def test_values_do_not_depend_on_the_block(monkeypatch, brdf, n):
 
 
 def test_vector_width_opt_out_and_user_setting():
-    code = ("import mrfpe.targets.kernels, mrfpe.threads as t, numba; "
+    code = ("import mrfpe.engine, mrfpe.threads as t, numba; "
             "print(t.configure_vector_width(), numba.config.CPU_FEATURES is None)")
     env = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_CPU")}
     out = subprocess.run([sys.executable, "-c", code], env={**env, "MRFPE_AVX512": "0"},
@@ -216,7 +223,7 @@ def test_vector_width_opt_out_and_user_setting():
     out = subprocess.run([sys.executable, "-c", code], env={**env, "NUMBA_CPU_NAME": "generic"},
                          capture_output=True, text=True, check=True).stdout.split()
     assert out[0] == "user"
-    code2 = ("import numba; numba.njit(lambda x: x)(1); import mrfpe.targets.kernels, "
+    code2 = ("import numba; numba.njit(lambda x: x)(1); import mrfpe.engine, "
              "mrfpe.threads as t; print(t.configure_vector_width())")
     out = subprocess.run([sys.executable, "-c", code2], env=env, capture_output=True, text=True,
                          check=True).stdout.split()
@@ -224,7 +231,7 @@ def test_vector_width_opt_out_and_user_setting():
 
 
 def test_node_block_is_the_largest_that_keeps_two_blocks_per_thread():
-    from mrfpe.targets.lean import NODE_BLOCK, NODE_BLOCK_MAX, node_block
+    from mrfpe.engine.lean_nodes import NODE_BLOCK, NODE_BLOCK_MAX, node_block
 
     assert node_block(10201, 1) == NODE_BLOCK_MAX == 1024  # 100x100: 10 blocks
     assert node_block(10201, 2) == 1024
@@ -238,7 +245,7 @@ def test_node_block_is_the_largest_that_keeps_two_blocks_per_thread():
 @pytest.mark.parametrize("dtype", ["float64", "float32"])
 def test_nodes_kernel_gives_the_same_bits_for_every_block_size(brdf, u, surface, dtype,
                                                                monkeypatch):
-    import mrfpe.targets.lean as lean
+    import mrfpe.engine.lean_nodes as lean
 
     s = _scene(brdf, u, surface, shape=(40, 37), n_labels=6)
     t = get("pls", s, dtype=dtype)
@@ -256,13 +263,13 @@ def test_nodes_kernel_gives_the_same_bits_for_every_block_size(brdf, u, surface,
 
 @pytest.mark.parametrize("dtype", ["float64", "float32"])
 def test_nodes_kernel_isotropic_path_gives_the_same_bits_as_the_general_one(dtype, monkeypatch):
-    import mrfpe.targets.lean as lean
+    import mrfpe.engine.lean_nodes as lean
 
     brdf, u, surface = CASES[1]  # isotropic Phong: every G2 = 0
     t = get("pls", _scene(brdf, u, surface, shape=(20, 23)), dtype=dtype)
-    assert lean.lean_tables(t._tables, True).isotropic
+    assert lean_tables(t._tables, True).isotropic
     aniso = get("pls", _scene(*CASES[3], shape=(20, 23)), dtype=dtype)
-    assert not lean.lean_tables(aniso._tables, True).isotropic
+    assert not lean_tables(aniso._tables, True).isotropic
 
     x = _points(len(u), n=2)
     iso = [(t.log_prob(x[:k]), t.node_terms(x[:k])) for k in (1, 2)]
@@ -282,7 +289,7 @@ def test_nodes_kernel_isotropic_path_gives_the_same_bits_as_the_general_one(dtyp
 @pytest.mark.parametrize("brdf,u,surface", [CASES[0], CASES[3]])
 @pytest.mark.parametrize("dtype", ["float64", "float32"])
 def test_small_batches_run_the_nodes_kernel_and_agree_with_large_ones(brdf, u, surface, dtype):
-    from mrfpe.targets.lean import NODE_BLOCK
+    from mrfpe.engine.lean_nodes import NODE_BLOCK
 
     # more nodes than a block, not a multiple of it: blocks cross the chunks
     s = _scene(brdf, u, surface, shape=(29, 31), n_labels=9)
@@ -298,6 +305,5 @@ def test_small_batches_run_the_nodes_kernel_and_agree_with_large_ones(brdf, u, s
                                    atol=rtol * np.max(np.abs(big)))
         np.testing.assert_allclose(t.log_prob(x[:k]), lp[:k], rtol=rtol,
                                    atol=rtol * np.max(np.abs(lp)))
-    with use_kernel("classic"):
-        ref = t.log_prob(x[:1])
+    ref = get("pls", s, dtype=dtype, kernel="classic").log_prob(x[:1])
     np.testing.assert_allclose(t.log_prob(x[:1]), ref, rtol=rtol, atol=rtol * abs(ref[0]))

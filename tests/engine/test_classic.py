@@ -1,4 +1,4 @@
-"""The numba kernel against plain numpy, and its vectorisable exp / log."""
+"""The classic kernels against plain numpy, and the vectorisable exp / log of fastmath."""
 
 from __future__ import annotations
 
@@ -6,16 +6,10 @@ import numpy as np
 import pytest
 from numba import njit
 
+from mrfpe.engine.classic import BLOCK, block_size, classic_terms, classic_terms_labels
+from mrfpe.engine.fastmath import vexp, vlog
 from mrfpe.targets import reflectance
 from mrfpe.targets.energy import DataTables, chunk_bounds, energies_reference
-from mrfpe.targets.kernels import (
-    BLOCK,
-    block_size,
-    pl_terms,
-    pl_terms_labels,
-    vexp,
-    vlog,
-)
 
 
 @njit(error_model="numpy")
@@ -94,9 +88,9 @@ def _run(tab, coef, unary, obs, sigma, a, b, per_node, full=True, labels=False,
     args = (tab.slot_ptr, tab.slot_y, tab.slot_w, tab.slot_nvar, tab.fix_feat, tab.var_ptr,
             tab.var_feat, unary, obs, 1.0 / sigma, chunks, a, b, b != 0, oc, on, per_node)
     if labels:
-        pl_terms_labels(ct, full, *args)
+        classic_terms_labels(ct, full, *args)
     else:
-        pl_terms(ct, bl, full, *args)
+        classic_terms(ct, bl, full, *args)
     return on[:, :N].T if per_node else oc[:, :N].sum(axis=0)
 
 
@@ -145,7 +139,7 @@ def test_chunks_are_deterministic_and_cover():
 
 
 def test_float32_exp_log():
-    from mrfpe.targets.kernels import vexp32, vlog32
+    from mrfpe.engine.fastmath import vexp32, vlog32
 
     @njit(error_model="numpy")
     def both(x, y, ox, oy):
@@ -187,7 +181,7 @@ def test_float32_kernel_close_to_numpy(labels):
             t32.var_feat, unary.astype(np.float32), obs, np.float32(1 / 0.07), chunks,
             np.float32(1), np.float32(-1), True, oc, np.zeros((1, 1)), False)
     if labels:
-        pl_terms_labels(ct, True, *args)
+        classic_terms_labels(ct, True, *args)
     else:
-        pl_terms(ct, bl, True, *args)
+        classic_terms(ct, bl, True, *args)
     np.testing.assert_allclose(oc[:, :N].sum(axis=0), want, rtol=2e-6)

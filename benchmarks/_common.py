@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from mrfpe.studies.report import markdown_table
+from mrfpe.experiments.writeup import markdown_table
 
 __all__ = ["CACHE", "RESULTS", "append_results", "best", "cached_maximiser", "command_line",
            "load_avg", "machine", "markdown_table", "peak_memory", "threading_layer",

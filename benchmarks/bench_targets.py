@@ -46,7 +46,7 @@ from benchmarks._common import (
     machine,
     peak_memory,
 )
-from mrfpe.studies._thesis import RUNTIME_MINUTES
+from mrfpe.experiments._thesis import RUNTIME_MINUTES
 
 THETA = {"ward": [0.7, 0.4, 0.45], "phong": [0.5, 0.4, 0.3], "lambertian": [0.7],
          "ward_aniso": [0.7, 0.4, 0.45, 0.3], "phong_aniso": [0.5, 0.4, 0.3, 0.5]}

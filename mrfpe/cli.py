@@ -174,7 +174,7 @@ def _study(args: argparse.Namespace) -> int:
 
 
 def _version() -> str:
-    from mrfpe import __version__
+    from mrfpe._version import __version__
 
     return f"mrfpe {__version__}"
 
@@ -189,7 +189,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--debug", action="store_true",
                    help="show the full traceback of an error instead of one line")
     sub = p.add_subparsers(dest="command", required=True)
+    _add_demo_and_warmup(sub)
+    _add_listings(sub, verbose)
+    _add_estimate(sub)
+    _add_compare(sub)
+    _add_study(sub, verbose)
+    return p
 
+
+def _add_demo_and_warmup(sub: Any) -> None:
     d = sub.add_parser("demo", help="estimate the reflectance of a synthetic surface: scene -> "
                        "PMC posterior -> verdict, figure and report",
                        description="Render a synthetic Ward scene with known parameters, "
@@ -212,6 +220,9 @@ def build_parser() -> argparse.ArgumentParser:
                        "on-disk cache, so that the first demo or estimate starts at once "
                        "(otherwise the first run compiles them, 20-60 s).")
     w.set_defaults(func=_warmup)
+
+
+def _add_listings(sub: Any, verbose: argparse.ArgumentParser) -> None:
     s = sub.add_parser("samplers", help="list registered samplers", parents=[verbose])
     s.set_defaults(func=_samplers)
     s = sub.add_parser("distances", help="list registered distances", parents=[verbose])
@@ -220,6 +231,8 @@ def build_parser() -> argparse.ArgumentParser:
                        parents=[verbose])
     s.set_defaults(func=_models)
 
+
+def _add_estimate(sub: Any) -> None:
     e = sub.add_parser("estimate", help="sample a target built from a scene netCDF file")
     e.add_argument("scene", help="scene netCDF file (Scene.save, or scene.nc of mrfpe demo)")
     e.add_argument("--sampler", default="pmc",
@@ -239,6 +252,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="overwrite --out even if it exists and is not a posterior file")
     e.set_defaults(func=_estimate)
 
+
+def _add_compare(sub: Any) -> None:
     c = sub.add_parser("compare", help="distance between two posterior netCDF files")
     c.add_argument("a", help="first posterior netCDF file (mrfpe estimate --out)")
     c.add_argument("b", help="second posterior netCDF file")
@@ -248,15 +263,28 @@ def build_parser() -> argparse.ArgumentParser:
                    help="distance parameter (repeatable), e.g. --param alpha=0.7")
     c.set_defaults(func=_compare)
 
+
+#: The positional argument of every ``mrfpe study`` command but ``list``.
+_STUDY_NAME = "study name (see 'mrfpe study list') or path to a .py file"
+
+
+def _add_study(sub: Any, verbose: argparse.ArgumentParser) -> None:
     st = sub.add_parser("study", help="reproducible studies of the thesis's experiments")
     st_sub = st.add_subparsers(dest="study_command", required=True)
     st_sub.add_parser("list", help="list studies with their trial counts and full-run times",
                       parents=[verbose])
     sh = st_sub.add_parser("show", help="a study's settings: type, default, --quick value, "
                                         "meaning")
-    sh.add_argument("name", help="study name (see 'mrfpe study list') or path to a .py file")
+    sh.add_argument("name", help=_STUDY_NAME)
+    _add_study_run(st_sub)
+    _add_study_report(st_sub)
+    _add_study_verify(st_sub)
+    st.set_defaults(func=_study)
+
+
+def _add_study_run(st_sub: Any) -> None:
     r = st_sub.add_parser("run", help="run (or resume) a study")
-    r.add_argument("name", help="study name (see 'mrfpe study list') or path to a .py file")
+    r.add_argument("name", help=_STUDY_NAME)
     r.add_argument("--quick", action="store_true",
                    help="the study's reduced settings (same code path, about a minute)")
     r.add_argument("--trials", type=int, default=None,
@@ -273,9 +301,12 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--force", action="store_true",
                    help="run even if --out holds another study's files (they are replaced "
                         "where names collide)")
+
+
+def _add_study_report(st_sub: Any) -> None:
     rp = st_sub.add_parser("report", help="write a study's report from the trial files on "
                                           "disk, running nothing (complete cells only)")
-    rp.add_argument("name", help="study name (see 'mrfpe study list') or path to a .py file")
+    rp.add_argument("name", help=_STUDY_NAME)
     rp.add_argument("--quick", action="store_true", help="the study's reduced settings")
     rp.add_argument("--trials", type=int, default=None, help="repetitions per grid cell")
     rp.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
@@ -283,8 +314,27 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--out", default=None, help="output directory, as for 'run'")
     rp.add_argument("--partial", action="store_true",
                     help="also summarise cells with only some repetitions on disk")
-    st.set_defaults(func=_study)
-    return p
+
+
+def _add_study_verify(st_sub: Any) -> None:
+    v = st_sub.add_parser(
+        "verify", help="replay trial files of a results directory and compare them bit for "
+                       "bit (exit 1 on any difference)",
+        description="Run trials of a results directory again from what their files record "
+                    "(config, cell, repetition, seed, numba threads) and compare every "
+                    "variable and every attribute but the timings and the run's provenance "
+                    "with the file, bit for bit. One verdict per trial; exit status 1 if any "
+                    "trial differs, cannot be replayed or fails.")
+    v.add_argument("name", help=_STUDY_NAME)
+    v.add_argument("--out", default=None,
+                   help="results directory holding trials/*.nc, e.g. docs/results/NAME "
+                        "(default: studies/NAME/out)")
+    v.add_argument("--count", type=int, default=None, metavar="K",
+                   help="replay at most K trials (default: every trial file)")
+    v.add_argument("--cheapest", action="store_true",
+                   help="the trials with the smallest recorded trial_wall_time_s first")
+    v.add_argument("--trial", action="append", default=[], metavar="STEM",
+                   help="replay this trial (its file name without .nc; repeatable)")
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -26,6 +26,7 @@ from mrfpe.geometry import (
     light_from_dict,
 )
 from mrfpe.lattice import Lattice
+from mrfpe.validation import check_beliefs
 
 __all__ = ["Scene"]
 
@@ -85,6 +86,17 @@ class Scene:
 
     # ------------------------------------------------------------------ validation
     def __post_init__(self) -> None:
+        H, W = self._check_image()
+        self._check_camera_and_light(H, W)
+        self._check_labels((H + 1, W + 1))
+        self._check_model()
+        self._check_node_priors()
+        self._check_shading_and_meta()
+        self._cache = {}
+
+    # Each check below replaces its fields by their checked, converted values, in the
+    # order the constructor calls them (a later check reads the earlier fields).
+    def _check_image(self) -> tuple[int, int]:
         img = _float_array(self.image, "image")
         if img.ndim != 2 or min(img.shape) < 1:
             raise ValueError(f"image must have shape (H, W) with H, W >= 1; got {img.shape}")
@@ -92,9 +104,9 @@ class Scene:
             raise ValueError(f"image contains {np.count_nonzero(~np.isfinite(img))} "
                              "NaN/inf values; it must be finite")
         self.image = img
-        H, W = img.shape
-        node_shape = (H + 1, W + 1)
+        return img.shape
 
+    def _check_camera_and_light(self, H: int, W: int) -> None:
         if not isinstance(self.camera, AffineCamera | ProjectiveCamera):
             raise ValueError(f"camera must be an AffineCamera or ProjectiveCamera; "
                              f"got {type(self.camera).__name__}")
@@ -106,6 +118,8 @@ class Scene:
             raise ValueError(f"light must be a DirectionalLight or PointLight; "
                              f"got {type(self.light).__name__}")
 
+    def _check_labels(self, node_shape: tuple[int, int]) -> None:
+        """``label_ranges`` (H+1, W+1, B) and ``observed_labels`` (H+1, W+1) in 0..B-1."""
         lr = _float_array(self.label_ranges, "label_ranges")
         if lr.ndim != 3 or lr.shape[:2] != node_shape:
             raise ValueError(f"label_ranges must have shape (H+1, W+1, B) = (*{node_shape}, B); "
@@ -135,29 +149,28 @@ class Scene:
                              f"got range [{obs.min()}, {obs.max()}]")
         self.observed_labels = obs
 
+    def _check_model(self) -> None:
         model = _brdf.get(self.brdf)  # ValueError names the argument
         self.brdf = model.name
         if self.true_theta is not None:
             tt = _float_array(self.true_theta, "true_theta").reshape(-1)
             self.true_theta = model.check_theta(tt, "true_theta")[0]
 
+    def _check_node_priors(self) -> None:
+        """``range_prior`` and ``beliefs``, each of ``label_ranges``'s shape, if given."""
+        shape = self.label_ranges.shape
         if self.range_prior is not None:
             rp = _float_array(self.range_prior, "range_prior")
-            if rp.shape != lr.shape:
-                raise ValueError(f"range_prior must have shape {lr.shape}; got {rp.shape}")
+            if rp.shape != shape:
+                raise ValueError(f"range_prior must have shape {shape}; got {rp.shape}")
             if np.any(np.isnan(rp)) or np.any(rp == -np.inf):
                 raise ValueError("range_prior must not contain NaN or -inf")
             self.range_prior = rp
         if self.beliefs is not None:
-            bl = _float_array(self.beliefs, "beliefs")
-            if bl.shape != lr.shape:
-                raise ValueError(f"beliefs must have shape {lr.shape}; got {bl.shape}")
-            if not np.all(np.isfinite(bl)) or np.any(bl < 0):
-                raise ValueError("beliefs must be finite and >= 0")
-            if not np.allclose(bl.sum(axis=2), 1.0, rtol=0, atol=1e-6):
-                raise ValueError("beliefs must be normalised per node (sum over labels = 1)")
-            self.beliefs = bl
+            self.beliefs = check_beliefs(self.beliefs, shape)
 
+    def _check_shading_and_meta(self) -> None:
+        """``tangent_ref``, ``noise_sigma`` and ``meta``."""
         ref = _float_array(self.tangent_ref, "tangent_ref")
         if ref.shape != (3,) or not np.all(np.isfinite(ref)) or not np.any(ref != 0):
             raise ValueError(f"tangent_ref must be a finite non-zero (3,) vector; got {ref}")
@@ -177,7 +190,6 @@ class Scene:
             json.dumps(self.meta, allow_nan=False)
         except (TypeError, ValueError) as exc:
             raise ValueError(f"meta must be JSON-serialisable: {exc}") from None
-        self._cache = {}
 
     # -------------------------------------------------------------------- accessors
     @property

@@ -211,25 +211,38 @@ def make_scene(brdf: str = "ward", theta: Any = None, shape: tuple[int, int] = (
         With ``observed_labels`` the true labels, ``true_theta`` in natural
         units and ``range_prior`` set; ``meta`` records the settings.
     """
+    settings = _checked_settings(brdf, theta, shape, n_labels, surface, light, noise, seed,
+                                 label_step, prior_sigma, n_control_points, depth, camera)
+    return _synthesise(settings, true_label, tangent_ref)
+
+
+@dataclasses.dataclass(frozen=True)
+class _Settings:
+    """:func:`make_scene`'s arguments, checked and converted (pixel-width units)."""
+
+    model: Any
+    theta: np.ndarray
+    H: int
+    W: int
+    B: int
+    seed: int | None
+    step_px: float
+    sigma_lab: float
+    noise: float
+    n_ctrl: int
+    depth: float | None
+    surface: str
+    camera: AffineCamera | ProjectiveCamera
+    light: Any
+
+
+def _checked_settings(brdf: str, theta: Any, shape: Any, n_labels: Any, surface: str,
+                      light: Any, noise: Any, seed: Any, label_step: Any, prior_sigma: Any,
+                      n_control_points: Any, depth: Any, camera: Any) -> _Settings:
+    """Every setting of :func:`make_scene` checked, before anything is drawn or allocated."""
     model = _brdf.get(brdf)
-    if theta is None:
-        raise ValueError(f"theta is required: the true {model.name} parameters "
-                         f"{model.param_names} in natural units")
-    try:
-        theta_arr = np.asarray(theta, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError(f"theta must be {model.d} numbers {model.param_names} in natural "
-                         f"units; got {theta!r}") from None
-    if theta_arr.shape != (model.d,):
-        raise ValueError(f"theta must have shape ({model.d},) for {model.name} "
-                         f"{model.param_names}; got {theta_arr.shape}")
-    theta_arr = model.check_theta(theta_arr)[0]
-    try:
-        H, W = (int(s) for s in shape)
-    except (TypeError, ValueError):
-        raise ValueError(f"shape must be (H, W); got {shape!r}") from None
-    if H < 1 or W < 1 or tuple(shape) != (H, W):
-        raise ValueError(f"shape must be (H, W) with integers >= 1; got {shape!r}")
+    theta_arr = _true_theta(model, theta)
+    H, W = _image_shape(shape)
     seed = check_seed(seed)
     # B >= 2: with one label the pseudolikelihood is identically 0 (no alternative label)
     B = _int_param(n_labels, "n_labels", 2)
@@ -247,6 +260,89 @@ def make_scene(brdf: str = "ward", theta: Any = None, shape: tuple[int, int] = (
         depth = _finite_float(depth, "depth")
     if surface not in ("smooth", "jagged"):
         raise ValueError(f"surface must be 'smooth' or 'jagged'; got {surface!r}")
+    camera = _camera_and_light(camera, light)
+    return _Settings(model, theta_arr, H, W, B, seed, step_px, sigma_lab, noise, n_ctrl, depth,
+                     surface, camera, light)
+
+
+def _synthesise(s: _Settings, true_label: Any, tangent_ref: Any) -> Scene:
+    """The scene of checked settings: surface, labels, prior, light, rendered image."""
+    H, W, B, camera = s.H, s.W, s.B, s.camera
+    ss = np.random.SeedSequence(s.seed)
+    rng_surface, rng_light, rng_label, rng_noise = (np.random.default_rng(x) for x in ss.spawn(4))
+
+    f = surface_ranges((H, W), s.surface, rng_surface, s.n_ctrl)  # pixel widths
+    centre_xy = np.array([W / 2.0, H / 2.0])
+    base, px = _base_depth(camera, centre_xy, f, max(H, W) + B * s.step_px, s.depth)
+    z = base + f * px  # true range of every node
+    step = s.step_px * px
+    t = _true_labels(true_label, rng_label, (H + 1, W + 1), B)
+
+    k = np.arange(B, dtype=np.float64)
+    # (k - t) * step is exactly 0.0 at k = t, so the true label's range is z bit for bit.
+    label_ranges = z[..., None] + (k - t[..., None]) * step
+    if isinstance(camera, ProjectiveCamera) and np.any(label_ranges <= 0):
+        raise ValueError(f"depth={s.depth!r} puts some candidate ranges behind the camera; "
+                         "choose a larger depth")
+    range_prior = np.abs(z[..., None] - label_ranges) / (s.sigma_lab * step)  # 7.4
+
+    light = s.light
+    if light is None:
+        mid = camera.points(centre_xy, np.array(float(np.median(z))))
+        light = random_light(rng_light, camera.to_camera(mid))
+
+    meta = {
+        "generator": "mrfpe.synthetic.make_scene",
+        "surface": s.surface,
+        "seed": None if s.seed is None else int(s.seed),
+        "label_step": s.step_px,
+        "prior_sigma": s.sigma_lab,
+        "n_control_points": s.n_ctrl,
+        "true_label": true_label if isinstance(true_label, str) else "given",
+        "depth": float(base),
+        "pixel_size": px,
+    }
+    scene = Scene(image=np.zeros((H, W)), camera=camera, light=light,
+                  label_ranges=label_ranges, observed_labels=t, brdf=s.model.name,
+                  true_theta=s.theta, range_prior=range_prior, tangent_ref=tangent_ref,
+                  noise_sigma=s.noise, meta=meta)
+    image = render(s.model, s.theta, scene.observed_points(), camera, scene.light,
+                   scene.tangent_ref)
+    if s.noise > 0:
+        image = image + rng_noise.normal(0.0, s.noise, image.shape)
+    # Rebuilding validates the image; label points are recomputed with identical bits.
+    return dataclasses.replace(scene, image=image)
+
+
+def _true_theta(model: Any, theta: Any) -> np.ndarray:
+    """``theta`` as the model's ``d`` natural parameters, checked against its bounds."""
+    if theta is None:
+        raise ValueError(f"theta is required: the true {model.name} parameters "
+                         f"{model.param_names} in natural units")
+    try:
+        theta_arr = np.asarray(theta, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"theta must be {model.d} numbers {model.param_names} in natural "
+                         f"units; got {theta!r}") from None
+    if theta_arr.shape != (model.d,):
+        raise ValueError(f"theta must have shape ({model.d},) for {model.name} "
+                         f"{model.param_names}; got {theta_arr.shape}")
+    return model.check_theta(theta_arr)[0]
+
+
+def _image_shape(shape: Any) -> tuple[int, int]:
+    """``(H, W)``, two integers >= 1."""
+    try:
+        H, W = (int(s) for s in shape)
+    except (TypeError, ValueError):
+        raise ValueError(f"shape must be (H, W); got {shape!r}") from None
+    if H < 1 or W < 1 or tuple(shape) != (H, W):
+        raise ValueError(f"shape must be (H, W) with integers >= 1; got {shape!r}")
+    return H, W
+
+
+def _camera_and_light(camera: Any, light: Any) -> AffineCamera | ProjectiveCamera:
+    """The camera (the orthographic one for ``None``), after checking both kinds."""
     if camera is None:
         camera = AffineCamera()
     if not isinstance(camera, AffineCamera | ProjectiveCamera):
@@ -255,29 +351,36 @@ def make_scene(brdf: str = "ward", theta: Any = None, shape: tuple[int, int] = (
     if light is not None and not isinstance(light, DirectionalLight | PointLight):
         raise ValueError(f"light must be a DirectionalLight, PointLight or None; "
                          f"got {type(light).__name__}")
+    return camera
 
-    ss = np.random.SeedSequence(seed)
-    rng_surface, rng_light, rng_label, rng_noise = (np.random.default_rng(s) for s in ss.spawn(4))
 
-    f = surface_ranges((H, W), surface, rng_surface, n_ctrl)  # pixel widths
-    centre_xy = np.array([W / 2.0, H / 2.0])
+def _base_depth(camera: Any, centre_xy: np.ndarray, f: np.ndarray, reach_px: float,
+                depth: float | None) -> tuple[float, float]:
+    """``(base, px)``: the range added to the surface, and one pixel's world width there.
+
+    ``reach_px`` is how far (in pixel widths) the affine camera's default depth puts the
+    nearest surface point: the image's size plus the labels' span.
+    """
     if isinstance(camera, ProjectiveCamera):
         d0 = _pos_float(_pixel_size(camera, centre_xy, 1.0), "camera pixel size")
         base = 1.0 / d0 if depth is None else float(depth)
         px = _pixel_size(camera, centre_xy, base)
     else:
         px = _pixel_size(camera, centre_xy, 0.0)
-        base = (max(H, W) + B * step_px) * px - f.min() * px if depth is None else float(depth)
+        base = reach_px * px - f.min() * px if depth is None else float(depth)
     if not np.isfinite(base):
         raise ValueError(f"depth must be finite; got {depth!r}")
-    z = base + f * px  # true range of every node
-    step = step_px * px
+    return base, px
 
+
+def _true_labels(true_label: Any, rng: np.random.Generator, nodes: tuple[int, int],
+                 B: int) -> np.ndarray:
+    """The index of each node's true range among its ``B`` labels (int64, ``nodes``)."""
     if isinstance(true_label, str):
         if true_label == "random":
-            t = rng_label.integers(0, B, size=(H + 1, W + 1))
+            t = rng.integers(0, B, size=nodes)
         elif true_label in ("centre", "center"):
-            t = np.full((H + 1, W + 1), B // 2)
+            t = np.full(nodes, B // 2)
         else:
             raise ValueError(f"true_label must be 'random', 'centre', an int or an "
                              f"(H+1, W+1) array; got {true_label!r}")
@@ -285,44 +388,10 @@ def make_scene(brdf: str = "ward", theta: Any = None, shape: tuple[int, int] = (
         t = np.asarray(true_label)
         if t.dtype.kind not in "iu":
             raise ValueError(f"true_label must hold integers; got dtype {t.dtype}")
-        t = np.broadcast_to(t, (H + 1, W + 1)) if t.ndim == 0 else t
-        if t.shape != (H + 1, W + 1):
-            raise ValueError(f"true_label must be an int or have shape {(H + 1, W + 1)}; "
+        t = np.broadcast_to(t, nodes) if t.ndim == 0 else t
+        if t.shape != nodes:
+            raise ValueError(f"true_label must be an int or have shape {nodes}; "
                              f"got {t.shape}")
         if t.min() < 0 or t.max() >= B:
             raise ValueError(f"true_label must lie in [0, {B - 1}]; got [{t.min()}, {t.max()}]")
-    t = np.array(t, dtype=np.int64)
-
-    k = np.arange(B, dtype=np.float64)
-    # (k - t) * step is exactly 0.0 at k = t, so the true label's range is z bit for bit.
-    label_ranges = z[..., None] + (k - t[..., None]) * step
-    if isinstance(camera, ProjectiveCamera) and np.any(label_ranges <= 0):
-        raise ValueError(f"depth={depth!r} puts some candidate ranges behind the camera; "
-                         "choose a larger depth")
-    range_prior = np.abs(z[..., None] - label_ranges) / (sigma_lab * step)  # 7.4
-
-    if light is None:
-        mid = camera.points(centre_xy, np.array(float(np.median(z))))
-        light = random_light(rng_light, camera.to_camera(mid))
-
-    meta = {
-        "generator": "mrfpe.synthetic.make_scene",
-        "surface": surface,
-        "seed": None if seed is None else int(seed),
-        "label_step": step_px,
-        "prior_sigma": sigma_lab,
-        "n_control_points": n_ctrl,
-        "true_label": true_label if isinstance(true_label, str) else "given",
-        "depth": float(base),
-        "pixel_size": px,
-    }
-    scene = Scene(image=np.zeros((H, W)), camera=camera, light=light,
-                  label_ranges=label_ranges, observed_labels=t, brdf=model.name,
-                  true_theta=theta_arr, range_prior=range_prior, tangent_ref=tangent_ref,
-                  noise_sigma=noise, meta=meta)
-    image = render(model, theta_arr, scene.observed_points(), camera, scene.light,
-                   scene.tangent_ref)
-    if noise > 0:
-        image = image + rng_noise.normal(0.0, noise, image.shape)
-    # Rebuilding validates the image; label points are recomputed with identical bits.
-    return dataclasses.replace(scene, image=image)
+    return np.array(t, dtype=np.int64)

@@ -14,9 +14,9 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["MAX_SEED", "check_bool", "check_bounds", "check_choice", "check_keywords",
-           "check_n_jobs", "check_positive_int", "check_range", "check_seed", "check_target",
-           "keyword_names"]
+__all__ = ["BELIEF_SUM_ATOL", "MAX_SEED", "check_beliefs", "check_bool", "check_bounds",
+           "check_choice", "check_keywords", "check_n_jobs", "check_positive_int", "check_range",
+           "check_seed", "check_target", "keyword_names"]
 
 
 def check_positive_int(name: str, value: Any, minimum: int = 1) -> int:
@@ -89,6 +89,28 @@ def check_bounds(bounds: Any, d: int, name: str = "bounds") -> np.ndarray:
     if b.shape != (d, 2) or not np.all(np.isfinite(b)) or np.any(b[:, 0] >= b[:, 1]):
         raise ValueError(f"{name} must be a finite ({d}, 2) array with lower < upper; "
                          f"got {b.tolist()}")
+    return b
+
+
+#: How far a node's beliefs may sum from 1 (:func:`check_beliefs`).
+BELIEF_SUM_ATOL = 1e-6
+
+
+def check_beliefs(beliefs: Any, shape: tuple[int, ...], name: str = "beliefs") -> np.ndarray:
+    """Per-node label beliefs as a new float64 array of ``shape`` (``(H+1, W+1, B)``), or
+    ValueError naming ``name``: finite, >= 0, and summing to 1 over each node's labels
+    (within :data:`BELIEF_SUM_ATOL`). Shared by :class:`mrfpe.scene.Scene` and the ``pl3``
+    target's ``beliefs`` option."""
+    try:
+        b = np.array(beliefs, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be a numeric array: {exc}") from None
+    if b.shape != tuple(shape):
+        raise ValueError(f"{name} must have shape {tuple(shape)}; got {b.shape}")
+    if not np.all(np.isfinite(b)) or np.any(b < 0):
+        raise ValueError(f"{name} must be finite and >= 0")
+    if not np.allclose(b.sum(axis=2), 1.0, rtol=0, atol=BELIEF_SUM_ATOL):
+        raise ValueError(f"{name} must be normalised per node (sum over labels = 1)")
     return b
 
 

@@ -94,7 +94,7 @@ def main(out_dir: str | Path = "mrfpe-demo", quick: bool = False, seed: int = 0)
     from mrfpe import posterior as P
     from mrfpe.brdf import get as get_brdf
     from mrfpe.demo.figure import CAPTION, posterior_figure
-    from mrfpe.studies.report import mean_sd
+    from mrfpe.experiments.writeup import mean_sd
     from mrfpe.synthetic import make_scene
     from mrfpe.validation import check_seed
 

@@ -12,6 +12,7 @@ import numpy as np
 import xarray as xr
 from scipy.special import logsumexp
 
+from mrfpe._version import __version__
 from mrfpe.posterior.diagnostics import ATTRS as _DIAG_ATTRS
 from mrfpe.posterior.diagnostics import (
     CHAIN_TYPES,
@@ -76,31 +77,15 @@ def _optional_float(name: str, value: Any) -> float | None:
     return float(value)
 
 
-def build(
-    theta: Any,
-    log_target: Any,
-    *,
-    param_names: Any,
-    log_weight: Any = None,
-    map_theta: Any = None,
-    map_log_target: Any = None,
-    ess: Any = None,
-    history_theta: Any = None,
-    history_log_weight: Any = None,
-    chain: Any = None,
-    kind: str = "draws",
-    log_evidence: float | None = None,
-    log_evidence_se: float | None = None,
-    bias: str | None = None,
-    sampler: str,
-    config: dict | None = None,
-    seed: int | None = None,
-    target: Any = None,
-    n_target_evals: float = 0.0,
-    wall_time_s: float = 0.0,
-    extra_vars: dict[str, tuple] | None = None,
-    extra_attrs: dict[str, Any] | None = None,
-) -> xr.Dataset:
+def build(theta: Any, log_target: Any, *, param_names: Any, log_weight: Any = None,
+          map_theta: Any = None, map_log_target: Any = None, ess: Any = None,
+          history_theta: Any = None, history_log_weight: Any = None, chain: Any = None,
+          kind: str = "draws", log_evidence: float | None = None,
+          log_evidence_se: float | None = None, bias: str | None = None, sampler: str,
+          config: dict | None = None, seed: int | None = None, target: Any = None,
+          n_target_evals: float = 0.0, wall_time_s: float = 0.0,
+          extra_vars: dict[str, tuple] | None = None,
+          extra_attrs: dict[str, Any] | None = None) -> xr.Dataset:
     """Assemble the posterior Dataset, diagnose it and warn if it is unreliable.
 
     Parameters
@@ -144,6 +129,34 @@ def build(
         Once, when a posterior of kind ``"draws"`` is unreliable (too small an ESS,
         a heavy weight tail, unmixed chains), saying what to change.
     """
+    theta, names, lt = _samples(theta, param_names, log_target, sampler)
+    if kind not in KINDS:
+        raise ValueError(f"kind must be one of {', '.join(KINDS)}; got {kind!r}")
+    lw = _log_weights(log_weight, theta.shape[0], sampler)
+    map_theta, map_log_target, ess = _trace(theta, lt, map_theta, map_log_target, ess)
+    data = {
+        "theta": (("sample", "param"), theta),
+        "log_weight": (("sample",), lw),
+        "log_target": (("sample",), lt),
+        "map_theta": (("step", "param"), map_theta),
+        "map_log_target": (("step",), map_log_target),
+        "ess": (("step",), ess),
+        **_optional_variables(history_theta, history_log_weight, chain, theta.shape[0]),
+        **(extra_vars or {}),
+    }
+    attrs = _attributes(sampler, config, seed, target, n_target_evals, wall_time_s, kind,
+                        log_evidence, log_evidence_se, bias, extra_attrs)
+    post = xr.Dataset(data, coords={"param": names, "step": np.arange(map_theta.shape[0])},
+                      attrs=attrs)
+    diag = diagnose(post)
+    post.attrs.update(diagnostics_attrs(diag))
+    warn_if_unreliable(diag, sampler)
+    return post
+
+
+def _samples(theta: Any, param_names: Any, log_target: Any,
+             sampler: str) -> tuple[np.ndarray, list[str], np.ndarray]:
+    """``theta`` (S, d) finite, its ``d`` parameter names and ``log_target`` (S,), checked."""
     theta = _float_array("theta", theta)
     if theta.ndim != 2:
         raise ValueError(f"theta must be (sample, param); got shape {theta.shape}")
@@ -159,16 +172,40 @@ def build(
     if lt.shape[0] != theta.shape[0]:
         raise ValueError(f"log_target has {lt.shape[0]} values for {theta.shape[0]} samples")
     _check_log_target(lt, f"log_target of the posterior of {sampler}")
-    if kind not in KINDS:
-        raise ValueError(f"kind must be one of {', '.join(KINDS)}; got {kind!r}")
+    return theta, names, lt
+
+
+def _log_weights(log_weight: Any, n: int, sampler: str) -> np.ndarray:
+    """The ``n`` log weights, checked and normalised (equal ones for ``None``)."""
     if log_weight is None:
-        lw = np.zeros(theta.shape[0])
+        lw = np.zeros(n)
     else:
         lw = _float_array("log_weight", log_weight).reshape(-1)
-        if lw.shape[0] != theta.shape[0]:
-            raise ValueError(f"log_weight has {lw.shape[0]} values for {theta.shape[0]} samples")
+        if lw.shape[0] != n:
+            raise ValueError(f"log_weight has {lw.shape[0]} values for {n} samples")
         check_log_weights(lw, f"log_weight of the posterior of {sampler}", allow_posinf=False)
-    lw = normalise_log_weights(lw)
+    return normalise_log_weights(lw)
+
+
+def _optional_variables(history_theta: Any, history_log_weight: Any, chain: Any,
+                        n: int) -> dict[str, tuple]:
+    """The history and chain variables that were given, checked."""
+    data: dict[str, tuple] = {}
+    if history_theta is not None:
+        data["history_theta"] = (("step", "sample", "param"),
+                                 _float_array("history_theta", history_theta))
+    if history_log_weight is not None:
+        data["history_log_weight"] = (("step", "sample"),
+                                      _float_array("history_log_weight", history_log_weight))
+    if chain is not None:
+        data["chain"] = (("sample",), _chain(chain, n))
+    return data
+
+
+def _trace(theta: np.ndarray, lt: np.ndarray, map_theta: Any, map_log_target: Any,
+           ess: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The per-step trace ``(map_theta, map_log_target, ess)``, one entry per step each;
+    without ``map_theta``, one step: the final set's best sample."""
     if map_theta is None:
         finite = np.where(np.isnan(lt), -np.inf, lt)
         best = int(np.argmax(finite)) if finite.size else 0
@@ -179,27 +216,15 @@ def build(
     ess = np.full(n_steps, np.nan) if ess is None else _float_array("ess", ess).reshape(-1)
     if ess.shape[0] != n_steps or map_log_target.shape[0] != n_steps:
         raise ValueError("map_theta, map_log_target and ess must have one entry per step")
-    data = {
-        "theta": (("sample", "param"), theta),
-        "log_weight": (("sample",), lw),
-        "log_target": (("sample",), lt),
-        "map_theta": (("step", "param"), map_theta),
-        "map_log_target": (("step",), map_log_target),
-        "ess": (("step",), ess),
-    }
-    if history_theta is not None:
-        data["history_theta"] = (("step", "sample", "param"),
-                                 _float_array("history_theta", history_theta))
-    if history_log_weight is not None:
-        data["history_log_weight"] = (("step", "sample"),
-                                      _float_array("history_log_weight", history_log_weight))
-    if chain is not None:
-        data["chain"] = (("sample",), _chain(chain, theta.shape[0]))
-    for k, v in (extra_vars or {}).items():
-        data[k] = v
-    target_desc = target.describe() if hasattr(target, "describe") else (target or {})
-    from mrfpe import __version__
+    return map_theta, map_log_target, ess
 
+
+def _attributes(sampler: str, config: dict | None, seed: int | None, target: Any,
+                n_target_evals: float, wall_time_s: float, kind: str,
+                log_evidence: float | None, log_evidence_se: float | None, bias: str | None,
+                extra_attrs: dict[str, Any] | None) -> dict[str, Any]:
+    """The posterior's attributes but the diagnostics (see :func:`build`)."""
+    target_desc = target.describe() if hasattr(target, "describe") else (target or {})
     attrs = {
         "sampler": sampler,
         "config": _json(config or {}),
@@ -220,11 +245,7 @@ def build(
                              f"got {bias!r}")
         attrs["bias"] = bias
     attrs.update(extra_attrs or {})
-    post = xr.Dataset(data, coords={"param": names, "step": np.arange(n_steps)}, attrs=attrs)
-    diag = diagnose(post)
-    post.attrs.update(diagnostics_attrs(diag))
-    warn_if_unreliable(diag, sampler)
-    return post
+    return attrs
 
 
 _REQUIRED_VARS = {

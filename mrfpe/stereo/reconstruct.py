@@ -124,6 +124,23 @@ def _shading_image(image: Any, name: str) -> np.ndarray:
     return img.mean(axis=2) if img.shape[2] > 1 else img[:, :, 0]
 
 
+def _ranges_in_front(P_left: Any, P_right: Any, disp: np.ndarray,
+                     shape: tuple[int, int]) -> np.ndarray:
+    """Every (node, disparity label)'s range along the left camera's ray, (H+1, W+1, B);
+    ValueError naming the labels whose points are not in front of both cameras at a
+    finite range."""
+    pts = label_points(P_left, P_right, disp, shape)
+    with np.errstate(invalid="ignore", over="ignore"):
+        ranges = label_ranges(P_left, pts)
+    ok = np.isfinite(ranges) & (ranges > 0) & (_depth(P_left, pts) > 0) \
+        & (_depth(P_right, pts) > 0)
+    if not np.all(ok):
+        bad = disp[~np.all(ok, axis=(0, 1))]
+        raise ValueError(f"min_disparity must keep every label in front of the cameras; "
+                         f"labels {bad[:5].tolist()} triangulate to infinity or behind them")
+    return ranges
+
+
 def scene_from_stereo(left: Any, right: Any, P_left: Any, P_right: Any, light: Any, *,
                       max_disparity: float, min_disparity: float = 1.0, step: float = 1.0,
                       brdf: str = "ward", image: Any = None, true_theta: Any = None,
@@ -188,16 +205,8 @@ def scene_from_stereo(left: Any, right: Any, P_left: Any, P_right: Any, light: A
     elif not isinstance(result, DisparityResult) or result.map.shape != (H + 1, W + 1):
         raise ValueError(f"result must be a DisparityResult for a {(H, W)} image pair")
     disp = result.disparities
-    pts = label_points(P_left, P_right, disp, (H, W))
-    with np.errstate(invalid="ignore", over="ignore"):
-        ranges = label_ranges(P_left, pts)
     cam = ProjectiveCamera(P_left, image_shape=(H, W))
-    ok = np.isfinite(ranges) & (ranges > 0) & (_depth(P_left, pts) > 0) \
-        & (_depth(P_right, pts) > 0)
-    if not np.all(ok):
-        bad = disp[~np.all(ok, axis=(0, 1))]
-        raise ValueError(f"min_disparity must keep every label in front of the cameras; "
-                         f"labels {bad[:5].tolist()} triangulate to infinity or behind them")
+    ranges = _ranges_in_front(P_left, P_right, disp, (H, W))
     settings = dict(result.settings)
     meta = {"generator": "mrfpe.stereo.scene_from_stereo", "stereo": settings,
             "disparities": disp.tolist(), "bp_energy": result.energy.tolist(),

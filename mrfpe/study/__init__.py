@@ -34,36 +34,40 @@ The runner (:func:`run`, ``mrfpe study run``)
 - calls the study's summary once every trial is on disk (``report.md`` and
   PNGs in the output directory) and prints its table.
 
-Where studies come from (:func:`available`): the built-in studies are the
-modules of the :mod:`mrfpe.studies` package (so they ship with every install
-and dask workers import them by name); a user's own study is a file
-``studies/<name>/study.py`` under the current directory (DESIGN.md's layout),
-or any ``.py`` path given as the name. A study module defines ``STUDY``.
+Where studies come from (:func:`available`, :func:`get`): installed studies are
+registered under the entry-point group ``mrfpe.studies`` -- mrfpe's own, the
+thesis's experiments in :mod:`mrfpe.experiments` (so they ship with every install
+and dask workers import them by name), and any other distribution's the same way
+-- and are read from the entry points without importing this package's content;
+a user's own study is a file ``studies/<name>/study.py`` under the current
+directory (DESIGN.md's layout), or any ``.py`` path given as the name. A study
+module defines ``STUDY``.
+
+``mrfpe study verify NAME --out DIR`` (:func:`verify`) replays trial files of a
+results directory and compares them with the files bit for bit.
 
 The package, one idea a module: :mod:`~mrfpe.study.spec` (:class:`Study`,
-:class:`Setting`), :mod:`~mrfpe.study.config` (``--set`` parsing, coercion,
-resolution, hash), :mod:`~mrfpe.study.seeds` (trials and their seeds),
+:class:`Setting`), :mod:`~mrfpe.study.config` (setting values: ``--set`` parsing,
+coercion, canonical JSON), :mod:`~mrfpe.study.resolve` (a study's effective
+config and its hash), :mod:`~mrfpe.study.seeds` (trials and their seeds),
 :mod:`~mrfpe.study.discovery`, :mod:`~mrfpe.study.trial` (one trial, written
 atomically), :mod:`~mrfpe.study.runner` (:func:`run`, lock, resume),
-:mod:`~mrfpe.study.cluster` (dask), :mod:`~mrfpe.study.results` (:func:`by_cell`)
-and :mod:`~mrfpe.study.command` (``mrfpe study ...``).
+:mod:`~mrfpe.study.cluster` (dask), :mod:`~mrfpe.study.results` (:func:`by_cell`),
+:mod:`~mrfpe.study.summary` (:func:`summarise_existing`),
+:mod:`~mrfpe.study.verification` (:func:`verify`) and :mod:`~mrfpe.study.command`
+(``mrfpe study ...``).
 """
 
 from mrfpe.study.command import cli, default_out_dir
-from mrfpe.study.config import (
-    apply_overrides,
-    config_hash,
-    parse_assignment,
-    parse_assignments,
-    parse_value,
-    resolve_config,
-)
+from mrfpe.study.config import parse_assignment, parse_assignments, parse_value
 from mrfpe.study.discovery import available, get, load_file
+from mrfpe.study.resolve import apply_overrides, config_hash, resolve_config
 from mrfpe.study.results import by_cell
 from mrfpe.study.runner import RunReport, run
 from mrfpe.study.seeds import Task, tasks, trial_seed
 from mrfpe.study.spec import Setting, Study
 from mrfpe.study.summary import Summary, summarise_existing
+from mrfpe.study.verification import TrialVerdict, VerifyReport, verify
 
 __all__ = [
     "RunReport",
@@ -71,6 +75,8 @@ __all__ = [
     "Study",
     "Summary",
     "Task",
+    "TrialVerdict",
+    "VerifyReport",
     "apply_overrides",
     "available",
     "by_cell",
@@ -87,4 +93,5 @@ __all__ = [
     "summarise_existing",
     "tasks",
     "trial_seed",
+    "verify",
 ]

@@ -7,16 +7,14 @@ import sys
 import traceback
 import uuid
 from collections.abc import Callable, Mapping
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import xarray as xr
 
 from mrfpe.netcdf import DiskFullError
 from mrfpe.study.seeds import Task
+from mrfpe.study.spec import Study
 from mrfpe.study.trial import execute
-
-if TYPE_CHECKING:
-    from mrfpe.study.spec import Study
 
 __all__ = ["CONNECT_TIMEOUT_S", "connect", "execute_pickled", "run_on_cluster"]
 

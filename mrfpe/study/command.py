@@ -1,4 +1,7 @@
-"""``mrfpe study list|show|run``: the study side of the command line (parsing is in mrfpe.cli)."""
+"""``mrfpe study list|show|run|report|verify``: the study side of the command line.
+
+The arguments are parsed in :mod:`mrfpe.cli`.
+"""
 
 from __future__ import annotations
 
@@ -11,6 +14,7 @@ from mrfpe._terminal import WIDTH, plain, shorten, table
 from mrfpe.netcdf import DiskFullError
 from mrfpe.study.config import canonical
 from mrfpe.study.discovery import available, get
+from mrfpe.study.resolve import resolve_config
 from mrfpe.study.runner import run
 from mrfpe.study.seeds import tasks
 from mrfpe.study.spec import Study
@@ -24,8 +28,6 @@ def list_text(verbose: bool = False) -> str:
     At most :data:`~mrfpe._terminal.WIDTH` columns; the full-run column holds the time
     only, ``verbose`` adds its explanation (``mrfpe study show NAME`` has everything).
     """
-    from mrfpe.study.config import resolve_config
-
     broken: dict[str, str] = {}
     studies = available(broken)
     when = (lambda s: plain(s.full_run)) if verbose else (lambda s: _run_time(s.full_run))
@@ -75,14 +77,24 @@ def default_out_dir(study: Study, quick: bool) -> Path:
     return Path("studies") / study.name / ("out-quick" if quick else "out")
 
 
+def _verify(study: Study, args: Any) -> int:
+    """``mrfpe study verify``: a verdict per trial as it is reached, then the count."""
+    from mrfpe.study.verification import verify
+
+    out = Path(args.out) if args.out else default_out_dir(study, False)
+    print(f"study {study.name} ({study.source}): replaying trials of {out}", flush=True)
+    report = verify(study, out, count=args.count, cheapest=args.cheapest, trials=args.trial,
+                    log=lambda verdict: print(verdict.text(), flush=True))
+    print(report.text())
+    return 0 if report.ok else 1
+
+
 def cli(args: Any) -> int:
-    """Entry point of ``mrfpe study list|show|run`` (arguments parsed by :mod:`mrfpe.cli`).
+    """Entry point of ``mrfpe study ...`` (arguments parsed by :mod:`mrfpe.cli`).
 
     Input errors raise ``ValueError`` before any trial runs; :func:`mrfpe.cli.main`
     prints them as one line and exits 2.
     """
-    from mrfpe.study.config import resolve_config
-
     if args.study_command == "list":
         print(list_text(verbose=getattr(args, "verbose", False)))
         return 0
@@ -90,6 +102,8 @@ def cli(args: Any) -> int:
     if args.study_command == "show":
         print(settings_text(study))
         return 0
+    if args.study_command == "verify":
+        return _verify(study, args)
     config = resolve_config(study, quick=args.quick, overrides=args.set, n_trials=args.trials)
     out = Path(args.out) if args.out else default_out_dir(study, args.quick)
     if args.study_command == "report":

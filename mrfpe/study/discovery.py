@@ -1,28 +1,66 @@
-"""Where studies come from: the built-in modules of :mod:`mrfpe.studies`, local files, paths."""
+"""Where studies come from: installed ones (entry points), local files, paths.
+
+Installed studies are registered under the entry-point group ``mrfpe.studies``
+(:data:`GROUP`), each naming a module's ``STUDY`` object: mrfpe's own (the
+thesis's experiments, :mod:`mrfpe.experiments`) in its ``pyproject.toml``, as
+its samplers, models and distances are, and any other distribution's the same
+way. The machinery never imports a study package: listing the names reads the
+entry points' metadata only, :func:`get` imports the one study asked for, and
+:func:`available` imports them all (through a :class:`~mrfpe._plugins.Registry`,
+so that one broken study, or a distribution taking a built-in's name, is
+reported and left out instead of breaking the rest).
+"""
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import hashlib
-import importlib
+import importlib.metadata as md
 import importlib.util
 import os
-import pkgutil
 import sys
 from collections.abc import Callable
 from pathlib import Path
 from types import ModuleType
+from typing import Any
 
+from mrfpe._plugins import Registry
 from mrfpe.study.spec import Study
 
-__all__ = ["available", "get", "load_file"]
+__all__ = ["GROUP", "available", "get", "load_file", "registry"]
+
+#: The entry-point group of installed studies (``name = "package.module:STUDY"``).
+GROUP = "mrfpe.studies"
+
+
+def _check_study(obj: Any) -> None:
+    if not isinstance(obj, Study):
+        raise TypeError(f"not a mrfpe.study.Study (a {type(obj).__name__}); an entry point "
+                        f"of {GROUP!r} must name a module's STUDY = mrfpe.study.Study(...)")
+
+
+#: The installed studies, by entry-point name (loaded by :func:`available` only).
+registry = Registry(GROUP, "study", _check_study)
+
+
+def _located(study: Any, where: str) -> Study:
+    """``study`` with :attr:`Study.source` set to ``where`` (a changed copy)."""
+    if not isinstance(study, Study):
+        raise ValueError(f"{where} does not define STUDY = mrfpe.study.Study(...)")
+    return dataclasses.replace(study, source=where)
 
 
 def _study_of(module: ModuleType, where: str) -> Study:
-    study = getattr(module, "STUDY", None)
-    if not isinstance(study, Study):
-        raise ValueError(f"{where} does not define STUDY = mrfpe.study.Study(...)")
-    object.__setattr__(study, "source", where)
+    return _located(getattr(module, "STUDY", None), where)
+
+
+def _installed(name: str, study: Any, target: str) -> Study:
+    """An entry point's study, found where its module is; its name must be the entry's."""
+    study = _located(study, target.split(":", 1)[0])
+    if study.name != name:
+        raise ValueError(f"entry point {name!r} of {GROUP!r} ({target}) names a study called "
+                         f"{study.name!r}; the two names must agree")
     return study
 
 
@@ -59,16 +97,42 @@ def _local_dir() -> Path:
     return Path.cwd() / "studies"
 
 
-def _builtin_names() -> list[str]:
-    import mrfpe.studies as pkg
+def _entry_points(name: str | None = None) -> list[md.EntryPoint]:
+    """The group's entry points (all, or those called ``name``), without importing any."""
+    eps = md.entry_points(group=GROUP) if name is None else md.entry_points(group=GROUP,
+                                                                             name=name)
+    return list(eps)
 
-    helpers = set(getattr(pkg, "HELPER_MODULES", ()))
-    return sorted(i.name for i in pkgutil.iter_modules(pkg.__path__)
-                  if not i.name.startswith("_") and i.name not in helpers)
+
+def _installed_names() -> list[str]:
+    return sorted({ep.name for ep in _entry_points()})
+
+
+def _get_installed(name: str) -> Study:
+    """The installed study ``name``, importing its module only.
+
+    Registered once (the usual case), its entry point is loaded directly; claimed by
+    several distributions, the registry decides as it does for samplers (the built-in
+    keeps its name).
+    """
+    eps = _entry_points(name)
+    if len({ep.value for ep in eps}) == 1:
+        ep = eps[0]
+        try:
+            obj = ep.load()
+        except (Exception, SystemExit) as exc:  # a broken study: say which and why
+            raise ValueError(f"study {name!r} ({ep.value}) is broken: "
+                             f"{type(exc).__name__}: {exc}") from None
+        return _installed(name, obj, ep.value)
+    info = registry.entries()[name]
+    if not info.ok:
+        raise ValueError(f"study {name!r} is broken: {info.error}")
+    return _installed(name, info.obj, info.target)
 
 
 def available(broken: dict[str, str] | None = None) -> dict[str, Study]:
-    """Built-in studies, then ``./studies/<name>/study.py`` (a local one shadows a built-in).
+    """Installed studies, then ``./studies/<name>/study.py`` (a local one shadows an
+    installed one of the same name).
 
     A study that fails to load is left out; pass a dict as ``broken`` to
     receive ``{name: error}`` for those.
@@ -82,9 +146,11 @@ def available(broken: dict[str, str] | None = None) -> dict[str, Study]:
             if broken is not None:
                 broken[name] = getattr(exc, "reason", f"{type(exc).__name__}: {exc}")
 
-    for name in _builtin_names():
-        mod = f"mrfpe.studies.{name}"
-        add(name, lambda mod=mod: _study_of(importlib.import_module(mod), mod))
+    for key, info in registry.entries().items():
+        if info.ok:
+            add(key, lambda key=key, info=info: _installed(key, info.obj, info.target))
+        elif broken is not None:
+            broken[key] = info.error or ""
     local = _local_dir()
     if local.is_dir():
         for path in sorted(local.glob("*/study.py")):
@@ -95,7 +161,7 @@ def available(broken: dict[str, str] | None = None) -> dict[str, Study]:
 def _names() -> list[str]:
     local = _local_dir()
     extra = [p.parent.name for p in local.glob("*/study.py")] if local.is_dir() else []
-    return sorted({*_builtin_names(), *extra})
+    return sorted({*_installed_names(), *extra})
 
 
 def get(name: str) -> Study:
@@ -105,9 +171,8 @@ def get(name: str) -> Study:
     local = _local_dir() / name / "study.py"
     if local.is_file():
         return load_file(local)
-    if name in _builtin_names():
-        return _study_of(importlib.import_module(f"mrfpe.studies.{name}"),
-                         f"mrfpe.studies.{name}")
+    if name in _installed_names():
+        return _get_installed(name)
     names = _names()
     near = difflib.get_close_matches(name, names, n=1)
     hint = f" (did you mean {near[0]!r}?)" if near else ""

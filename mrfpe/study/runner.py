@@ -16,8 +16,6 @@ import os
 import socket
 import time
 import traceback
-import warnings
-from collections import Counter
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -41,7 +39,9 @@ from mrfpe.study.trial import (
     error_path,
     execute,
     result_path,
+    trial_attrs,
     versions,
+    warnings_in_one_line,
     write_error,
     write_result,
 )
@@ -286,7 +286,7 @@ def run(study: Study, config: Mapping[str, Any], out_dir: str | os.PathLike, *,
             note(msg)
         provenance = versions()
         _write_manifest(study, config, out, len(todo), provenance)
-        with _warnings_in_one_line(progress and client is None and bool(pending),
+        with warnings_in_one_line(progress and client is None and bool(pending),
                                    report.notes.append):
             _run_pending(study, config, pending, trials_dir, provenance, report, client,
                          progress)
@@ -297,32 +297,12 @@ def run(study: Study, config: Mapping[str, Any], out_dir: str | os.PathLike, *,
     return report
 
 
-@contextlib.contextmanager
-def _warnings_in_one_line(active: bool, note: Callable[[str], None]) -> Iterator[None]:
-    """Hold the trials' warnings while a progress bar is drawn, then note them as one
-    line per run, counted by category and cause (the text before the first colon)."""
-    if not active:
-        yield
-        return
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        yield
-    if caught:
-        causes = Counter((w.category.__name__, str(w.message).split(":", 1)[0])
-                         for w in caught)
-        note(f"{len(caught)} warning(s) during the trials: " + "; ".join(
-            f"{cat} ×{n} ({cause})" for (cat, cause), n in causes.most_common()))
-
-
 def _run_pending(study: Study, config: Mapping[str, Any], pending: list[Task], trials_dir: Path,
                  provenance: Mapping[str, str], report: RunReport, client: Any,
                  progress: bool) -> None:
     def finish(task: Task, ds: xr.Dataset) -> None:
         write_result(ds, result_path(trials_dir, task.stem), {
-            "study": study.name, "study_version": study.version,
-            "config_hash": task.hash, "trial_config": canonical(task.config),
-            "study_config": canonical(dict(config)), "cell": canonical(task.cell),
-            "repeat": task.repeat, "seed": task.seed, "study_seed": config["seed"],
+            **trial_attrs(study, task, config),
             "finished_utc": datetime.now(UTC).isoformat(timespec="seconds"), **provenance})
         report.n_computed += 1
 

@@ -6,15 +6,14 @@ import hashlib
 from collections.abc import Mapping
 from dataclasses import dataclass
 from itertools import product
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
-from mrfpe.study.config import canonical, config_hash
+from mrfpe.study.config import canonical
+from mrfpe.study.resolve import config_hash
+from mrfpe.study.spec import Study
 from mrfpe.targets.budget import check_memory
-
-if TYPE_CHECKING:
-    from mrfpe.study.spec import Study
 
 __all__ = ["Task", "tasks", "trial_seed"]
 

@@ -84,8 +84,40 @@ class Setting:
         return value
 
 
+def _declared(name: str, settings: Sequence[Setting],
+              config: Mapping[str, Any] | None) -> tuple[Setting, ...]:
+    """Every setting of a study: the declared ones, then ``config``'s plain defaults."""
+    declared = {s.name: s for s in settings}
+    if len(declared) != len(settings):
+        raise ValueError(f"study {name!r}: a setting is declared twice")
+    for key, value in dict(config or {}).items():
+        if key in declared and json.dumps(declared[key].default, sort_keys=True) \
+                != json.dumps(value, sort_keys=True):
+            raise ValueError(f"study {name!r}: config[{key!r}] = {value!r} disagrees "
+                             f"with its declared default {declared[key].default!r}")
+        declared.setdefault(key, Setting(key, value, _BUILTIN_HELP.get(key, "")))
+    return tuple(declared.values())
+
+
 @dataclass(frozen=True)
-class Study:
+class _StudyFields:
+    """What a :class:`Study` holds, as its constructor completes and checks it."""
+
+    name: str
+    doc: str
+    trial: TrialFn
+    summarise: SummariseFn
+    settings: tuple[Setting, ...]
+    config: Mapping[str, Any]
+    quick: Mapping[str, Any]
+    grid: tuple[str, ...]
+    shared_seed: tuple[str, ...]
+    version: int
+    check: Callable[[dict], None] | None = field(compare=False)
+    source: str = field(compare=False)
+
+
+class Study(_StudyFields):
     """One reproducible experiment.
 
     Parameters
@@ -110,7 +142,9 @@ class Study:
     config
         Plain defaults, ``{name: value}``, JSON-serialisable and flat: a
         shorthand for settings without help or choices. Keys in both must
-        agree; after construction ``config`` holds every setting's default.
+        agree; after construction ``settings`` holds every setting (the
+        declared ones, then those of ``config``) and ``config`` every
+        setting's default.
     quick
         Overrides of the defaults for ``--quick`` (reduced size, same code path).
     grid
@@ -125,34 +159,27 @@ class Study:
         ``check(config)`` raising ``ValueError`` for settings that are wrong
         together (e.g. sampler options a listed sampler does not take); called
         on the resolved config, before any trial runs.
+    source
+        Where the study was found (a module, a file); set by discovery
+        (:func:`mrfpe.study.get`), recorded in ``config.json``.
+
+    A study is immutable: :func:`dataclasses.replace` makes a changed copy
+    (checked as the constructor checks).
     """
 
-    name: str
-    doc: str
-    trial: TrialFn
-    summarise: SummariseFn
-    settings: Sequence[Setting] = ()
-    config: Mapping[str, Any] | None = None
-    quick: Mapping[str, Any] = field(default_factory=dict)
-    grid: tuple[str, ...] = ()
-    shared_seed: tuple[str, ...] = ()
-    version: int = 1
-    check: Callable[[dict], None] | None = field(default=None, compare=False)
-    source: str = field(default="", compare=False)
+    def __init__(self, name: str, doc: str, trial: TrialFn, summarise: SummariseFn,
+                 settings: Sequence[Setting] = (), config: Mapping[str, Any] | None = None,
+                 quick: Mapping[str, Any] | None = None, grid: tuple[str, ...] = (),
+                 shared_seed: tuple[str, ...] = (), version: int = 1,
+                 check: Callable[[dict], None] | None = None, source: str = "") -> None:
+        declared = _declared(name, settings, config)
+        super().__init__(name, doc, trial, summarise, declared,
+                         {s.name: s.default for s in declared},
+                         {} if quick is None else quick, grid, shared_seed, version, check,
+                         source)
+        self._check_fields()
 
-    def __post_init__(self) -> None:
-        declared = {s.name: s for s in self.settings}
-        if len(declared) != len(self.settings):
-            raise ValueError(f"study {self.name!r}: a setting is declared twice")
-        plain = dict(self.config or {})
-        for key, value in plain.items():
-            if key in declared and json.dumps(declared[key].default, sort_keys=True) \
-                    != json.dumps(value, sort_keys=True):
-                raise ValueError(f"study {self.name!r}: config[{key!r}] = {value!r} disagrees "
-                                 f"with its declared default {declared[key].default!r}")
-            declared.setdefault(key, Setting(key, value, _BUILTIN_HELP.get(key, "")))
-        object.__setattr__(self, "settings", tuple(declared.values()))
-        object.__setattr__(self, "config", {k: s.default for k, s in declared.items()})
+    def _check_fields(self) -> None:
         for key in _RESERVED:
             if key not in self.config:
                 raise ValueError(f"study {self.name!r}: config must define {key!r}")

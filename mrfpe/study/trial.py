@@ -6,13 +6,16 @@ traceback in ``trials/<stem>.error.txt`` instead (removed once it succeeds).
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import json
 import os
 import platform
 import socket
 import time
-from collections.abc import Mapping
+import warnings
+from collections import Counter
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -20,9 +23,12 @@ import numpy as np
 import xarray as xr
 
 from mrfpe.netcdf import write_atomic, write_text_atomic
-from mrfpe.study.spec import TrialFn
+from mrfpe.study.config import canonical
+from mrfpe.study.seeds import Task
+from mrfpe.study.spec import Study, TrialFn
 
-__all__ = ["error_path", "execute", "result_path", "versions", "write_error", "write_result"]
+__all__ = ["error_path", "execute", "result_path", "trial_attrs", "versions",
+           "warnings_in_one_line", "write_error", "write_result"]
 
 
 def result_path(trials_dir: Path, stem: str) -> Path:
@@ -39,11 +45,20 @@ def versions() -> dict[str, str]:
     """Versions of mrfpe, its main dependencies, Python and the platform (provenance)."""
     import scipy
 
-    from mrfpe import __version__
+    from mrfpe._version import __version__
 
     return {"mrfpe_version": __version__, "numpy_version": np.__version__,
             "scipy_version": scipy.__version__, "xarray_version": xr.__version__,
             "python_version": platform.python_version(), "platform": platform.platform()}
+
+
+def trial_attrs(study: Study, task: Task, study_config: Mapping[str, Any]) -> dict[str, Any]:
+    """What a trial file records of its trial besides the result: the study, the trial's
+    config and its hash, its cell, repetition and seed, and the whole run's config."""
+    return {"study": study.name, "study_version": study.version, "config_hash": task.hash,
+            "trial_config": canonical(task.config), "study_config": canonical(dict(study_config)),
+            "cell": canonical(task.cell), "repeat": task.repeat, "seed": task.seed,
+            "study_seed": study_config["seed"]}
 
 
 def _netcdf_attr(value: Any) -> Any:
@@ -91,6 +106,23 @@ def write_result(ds: xr.Dataset, path: Path, attrs: Mapping[str, Any]) -> None:
     error = path.with_name(path.name[:-len(".nc")] + ".error.txt")
     if error.exists():  # an earlier failure of this trial is history now
         error.unlink()
+
+
+@contextlib.contextmanager
+def warnings_in_one_line(active: bool, note: Callable[[str], None]) -> Iterator[None]:
+    """Hold the trials' warnings while a progress bar is drawn, then note them as one
+    line per run, counted by category and cause (the text before the first colon)."""
+    if not active:
+        yield
+        return
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        yield
+    if caught:
+        causes = Counter((w.category.__name__, str(w.message).split(":", 1)[0])
+                         for w in caught)
+        note(f"{len(caught)} warning(s) during the trials: " + "; ".join(
+            f"{cat} ×{n} ({cause})" for (cat, cause), n in causes.most_common()))
 
 
 def write_error(path: Path, header: str, tb: str) -> None:

@@ -45,6 +45,7 @@ import numpy as np
 from mrfpe.targets.brdf_target import COMMON_OPTIONS, BRDFTarget, auto_sigma_b
 from mrfpe.targets.options import Option, bool_check, choice_check, number_check, optional
 from mrfpe.targets.residuals import RESIDUAL_KINDS
+from mrfpe.validation import check_beliefs
 
 __all__ = [
     "PL",
@@ -144,14 +145,8 @@ class PL3(BRDFTarget):
             b = np.asarray(scene.beliefs, dtype=np.float64)
             source = "scene"
         else:
-            b = np.asarray(beliefs, dtype=np.float64)
+            b = check_beliefs(beliefs, shape)
             source = "option"
-            if b.shape != shape:
-                raise ValueError(f"beliefs must have shape {shape}; got {b.shape}")
-            if not np.all(np.isfinite(b)) or np.any(b < 0):
-                raise ValueError("beliefs must be finite and >= 0")
-            if not np.allclose(b.sum(axis=2), 1.0, rtol=0, atol=1e-6):
-                raise ValueError("beliefs must be normalised per node (sum over labels = 1)")
         self._beliefs = b
         return {"temperature": T, "beliefs": source}
 

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from mrfpe import cli
 from mrfpe import study as S
-from mrfpe.studies import importance_sampling as toy
+from mrfpe.experiments import importance_sampling as toy
 from mrfpe.study.config import coerce_like, parse_assignment, parse_value
 
 json_scalars = st.none() | st.booleans() | st.integers(-10**12, 10**12) | \
@@ -131,7 +131,8 @@ def test_the_library_does_not_import_the_command_line():
     import subprocess
     import sys
 
-    code = ("import sys; from mrfpe import study as S; import mrfpe.studies.pmc_convergence as m; "
+    code = ("import sys; from mrfpe import study as S; "
+            "import mrfpe.experiments.pmc_convergence as m; "
             "S.resolve_config(m.STUDY, overrides=['n_labels=20']); "
             "assert 'mrfpe.cli' not in sys.modules, 'mrfpe.study imported mrfpe.cli'")
     subprocess.run([sys.executable, "-c", code], check=True)

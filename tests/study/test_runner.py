@@ -20,8 +20,8 @@ import pytest
 import xarray as xr
 
 from mrfpe import study as S
+from mrfpe.experiments import importance_sampling as toy
 from mrfpe.netcdf import open_dataset
-from mrfpe.studies import importance_sampling as toy
 
 SMALL = {"n_trials": 2, "n_samples": [10, 100]}
 

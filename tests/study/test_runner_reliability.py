@@ -14,8 +14,8 @@ import xarray as xr
 
 from mrfpe import cli
 from mrfpe import study as S
+from mrfpe.experiments import importance_sampling as toy
 from mrfpe.netcdf import DiskFullError, open_dataset
-from mrfpe.studies import importance_sampling as toy
 from mrfpe.study import runner, trial
 
 SMALL = ["n_trials=2", "n_samples=[10,100]"]

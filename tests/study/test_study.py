@@ -14,7 +14,7 @@ import xarray as xr
 
 from mrfpe import study as S
 from mrfpe.cli import main
-from mrfpe.studies import importance_sampling as toy
+from mrfpe.experiments import importance_sampling as toy
 
 SMALL = {"n_trials": 3, "n_samples": [10, 100]}
 

@@ -6,7 +6,7 @@ import pytest
 
 from mrfpe import study as S
 from mrfpe.cli import main
-from mrfpe.studies import importance_sampling as toy
+from mrfpe.experiments import importance_sampling as toy
 
 SMALL = {"n_trials": 2, "n_samples": [10, 100]}
 

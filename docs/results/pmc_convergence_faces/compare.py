@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from mrfpe.studies._thesis import PMC_TABLES
+from mrfpe.experiments._thesis import PMC_TABLES
 
 HERE = Path(__file__).resolve().parent
 CENTRES = HERE.parent / "pmc_convergence" / "trials"

@@ -31,9 +31,9 @@ import numpy as np
 import xarray as xr
 
 import mrfpe
-from mrfpe.studies._thesis import PMC_TABLES
-from mrfpe.studies.pmc_convergence import variant_options
-from mrfpe.studies.synthetic import child_seeds, distance, highest_weight, problem_from_config
+from mrfpe.experiments._thesis import PMC_TABLES
+from mrfpe.experiments.pmc_convergence import variant_options
+from mrfpe.experiments.problems import child_seeds, distance, highest_weight, problem_from_config
 
 HERE = Path(__file__).resolve().parent
 SOURCE = HERE.parent / "pmc_convergence_faces" / "trials"

@@ -11,7 +11,7 @@ import warnings
 
 import numpy as np
 
-from mrfpe.studies.synthetic import child_seeds, distance, problem_from_config, sample_traced
+from mrfpe.experiments.problems import child_seeds, distance, problem_from_config, sample_traced
 from mrfpe.study import get, resolve_config, tasks
 
 warnings.filterwarnings("ignore")

@@ -70,10 +70,10 @@ from pathlib import Path
 
 import numpy as np
 
+from mrfpe.experiments.pmc_convergence import STUDY
+from mrfpe.experiments.problems import child_seeds, make_problem
 from mrfpe.resampling import resample
 from mrfpe.samplers.kit import grid, jitter, log_ratio
-from mrfpe.studies.pmc_convergence import STUDY
-from mrfpe.studies.synthetic import child_seeds, make_problem
 from mrfpe.study import trial_seed
 
 HERE = Path(__file__).resolve().parent
@@ -452,9 +452,9 @@ def tables(rows: list[dict], maps=("bsf_cand", "it_pi"), min_scenes: int = 1,
     """Markdown tables: MAP distance (mean ± sd over scenes) and weight variances.
 
     Beside Table 7.1 (20 labels, Ward, PMC (II), 100 runs): the thesis's MAP
-    distance and "var" columns (``mrfpe.studies._thesis.PMC_TABLES``).
+    distance and "var" columns (``mrfpe.experiments._thesis.PMC_TABLES``).
     """
-    from mrfpe.studies._thesis import PMC_TABLES
+    from mrfpe.experiments._thesis import PMC_TABLES
 
     its = [0, 4, 9, 19]
     out = []

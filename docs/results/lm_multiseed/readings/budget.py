@@ -17,7 +17,7 @@ import warnings
 
 import xarray as xr
 
-from mrfpe.studies import lm_multiseed as m
+from mrfpe.experiments import lm_multiseed as m
 
 warnings.filterwarnings("ignore")
 cell, n = sys.argv[1], int(sys.argv[2])

@@ -21,7 +21,7 @@ import numpy as np
 import scipy.optimize as so
 
 import mrfpe
-from mrfpe.studies.synthetic import problem_from_config
+from mrfpe.experiments.problems import problem_from_config
 from mrfpe.study import get, resolve_config
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import xarray as xr
 
-from mrfpe.studies.lm_multiseed import budget_share, mean_over_scenes
+from mrfpe.experiments.lm_multiseed import budget_share, mean_over_scenes
 
 
 def _trial(dist: float, status: list[int] | None) -> xr.Dataset:

@@ -28,8 +28,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from mrfpe.studies.report import blank_figure, markdown_table, save_figure, write_report
-from mrfpe.studies.synthetic import (
+from mrfpe.experiments.problems import (
     check_sampler_options,
     check_target_options,
     child_seeds,
@@ -37,6 +36,7 @@ from mrfpe.studies.synthetic import (
     positive,
     settings,
 )
+from mrfpe.experiments.writeup import blank_figure, markdown_table, save_figure, write_report
 from mrfpe.study import Setting, Study
 
 CASES = [["ward", [0.7, 0.4, 0.9]], ["ward", [0.8, 0.9, 0.5]], ["phong", [0.8, 0.9, 0.5]]]

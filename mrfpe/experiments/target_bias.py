@@ -28,8 +28,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from mrfpe.studies.report import markdown_table, new_figure, save_figure, write_report
-from mrfpe.studies.synthetic import (
+from mrfpe.experiments.problems import (
     SURFACES,
     check_runs,
     check_target_options,
@@ -39,6 +38,7 @@ from mrfpe.studies.synthetic import (
     positive,
     settings,
 )
+from mrfpe.experiments.writeup import markdown_table, new_figure, save_figure, write_report
 from mrfpe.study import Setting, Study, by_cell
 
 

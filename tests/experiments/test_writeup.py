@@ -1,4 +1,4 @@
-"""The public summary helpers of :mod:`mrfpe.studies.report`."""
+"""The public summary helpers of :mod:`mrfpe.experiments.writeup`."""
 
 import math
 
@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from mrfpe.studies.report import fmt, markdown_table, mean_sd, new_figure, save_figure
+from mrfpe.experiments.writeup import fmt, markdown_table, mean_sd, new_figure, save_figure
 
 
 @pytest.mark.parametrize(("mean", "sd", "text"), [

@@ -58,9 +58,8 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from mrfpe.studies._thesis import AGMMP_SIGMAS, CLASSIFICATION
-from mrfpe.studies.report import markdown_table, new_figure, save_figure, write_report
-from mrfpe.studies.synthetic import (
+from mrfpe.experiments._thesis import AGMMP_SIGMAS, CLASSIFICATION
+from mrfpe.experiments.problems import (
     SURFACES,
     check_sampler_options,
     check_target_options,
@@ -69,6 +68,7 @@ from mrfpe.studies.synthetic import (
     positive,
     settings,
 )
+from mrfpe.experiments.writeup import markdown_table, new_figure, save_figure, write_report
 from mrfpe.study import Setting, Study
 from mrfpe.validation import check_n_jobs
 
@@ -236,12 +236,17 @@ def _columns(kind: str, config: dict) -> list[tuple[str, str, dict]]:
             *[(name, name, {}) for name in config["extra_distances"]]]
 
 
+#: Each table's title, by the kind of feature set and distance columns it shows.
+_TABLE_TITLES = {"unevolved": "samples at their initial grid positions",
+                 "evolved_agmmp": "PMC-evolved sets, AGMMP",
+                 "evolved": "PMC-evolved sets"}
+#: The similarity matrices drawn as heat-maps, by (table kind, column).
+_PICTURED = [("evolved", "symmetric_kl"), ("evolved_agmmp", "agmmp:0.005"),
+             ("unevolved", "emd"), ("unevolved", "corr")]
+
+
 def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
     """Similarity matrices, Miss/WNN/NN1 tables beside the thesis's, heat-maps."""
-    from scipy.spatial.distance import cdist
-
-    from mrfpe.classify import error_stats, knn_accuracy, plot_similarity, similarity_matrix
-
     sections = [f"Config: `{json.dumps(config)}`.",
                 "Each column classifies the specimens by one similarity; rows *Miss*, *WNN*, "
                 "*NN1* as defined under the thesis's Table 8.5 (lower is better; ties count as "
@@ -253,12 +258,7 @@ def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
     powers = sorted({*POWER_SWEEP, lam}, reverse=True)
     uniform = _uniform_cloud(config)
     for brdf in config["brdf"]:
-        group = [ds for ds in results if json.loads(ds.attrs["cell"])["brdf"] == brdf]
-        cells = [json.loads(ds.attrs["cell"]) for ds in group]
-        order = sorted(range(len(group)), key=lambda i: (cells[i]["material"],
-                                                         cells[i]["specimen"]))
-        group = [group[i] for i in order]
-        classes = np.array([cells[i]["material"] for i in order])
+        group, classes = _specimens(results, brdf)
         grids = {power: [_grid_set(ds, power) for ds in group] for power in powers}
         clouds = {flat: [_evolved_set(ds, flat) for ds in group] for flat in (False, True)}
         for power, posts in grids.items():
@@ -269,69 +269,97 @@ def summarise(results: list[xr.Dataset], config: dict, out_dir: Path) -> str:
                              + (" ←" if flat == uniform else ""), *_information(posts)])
         sets = {"unevolved": grids[lam], "evolved": clouds[uniform]}
         lm_best = np.stack([ds["lm_best"].values for ds in group])
-        matrices = {}
+        matrices: dict[tuple[str, str], np.ndarray] = {}
         for kind in ("unevolved", "evolved_agmmp", "evolved"):
             posts = sets["unevolved" if kind == "unevolved" else "evolved"]
-            header, stats = ["statistic"], {"miss": [], "wnn": [], "nn1": [], "acc": []}
-            for label, name, params in _columns(kind, config):
-                if name == "lm512":
-                    S = -cdist(lm_best, lm_best)
-                else:
-                    S = similarity_matrix(posts, name, n_jobs=config["summary_jobs"], **params)
-                matrices[(kind, label)] = S
-                st = error_stats(S, classes)
-                header.append(label)
-                for k in ("miss", "wnn", "nn1"):
-                    stats[k].append(st[k])
-                stats["acc"].append(knn_accuracy(S, classes))
-                summary_rows.append([brdf, kind, label, st["miss"], st["wnn"], st["nn1"],
-                                     stats["acc"][-1]])
-            rows = [["Miss", *stats["miss"]], ["WNN", *stats["wnn"]], ["NN1", *stats["nn1"]],
-                    ["1-NN acc.", *(f"{a:.2f}" for a in stats["acc"])]]
-            ref = CLASSIFICATION.get((brdf, kind))
-            if ref is not None:
-                lookup = dict(zip(ref["columns"], range(len(ref["columns"]))))
-                for k, shown in (("miss", "Miss"), ("wnn", "WNN"), ("nn1", "NN1")):
-                    rows.append([f"*thesis {shown}*",
-                                 *(f"*{ref[k][lookup[h]]}*" if h in lookup else "–"
-                                   for h in header[1:])])
-            title = {"unevolved": "samples at their initial grid positions",
-                     "evolved_agmmp": "PMC-evolved sets, AGMMP",
-                     "evolved": "PMC-evolved sets"}[kind]
-            table_no = f" (thesis Table {ref['table']})" if ref else ""
-            sections.append(f"## {brdf}: {title}{table_no}\n\n{len(group)} specimens, "
-                            f"{len(set(classes.tolist()))} materials.\n\n" +
-                            markdown_table(header, rows))
-        picks = [("evolved", "symmetric_kl"), ("evolved_agmmp", "agmmp:0.005"),
-                 ("unevolved", "emd"), ("unevolved", "corr")]
-        picks = [p for p in picks if p in matrices]
-        fig, axes = new_figure(1, len(picks), size=(4.6 * len(picks), 4.2))
-        for ax, (kind, label) in zip(axes[0], picks):
-            plot_similarity(_ranks(matrices[(kind, label)]), classes, ax=ax,
-                            title=f"{kind}: {label}", colorbar=False)
-        fig.suptitle(f"Similarity matrices, {brdf}, shown as ranks of the off-diagonal "
-                     "entries (Tables 8.3-8.5 as pictures)", fontsize=9)
-        figs.append(save_figure(fig, out_dir / f"similarity_{brdf}.png"))
-    weights = config["evolved_weights"]
-    if weights == "auto":  # name what it resolved to
-        weights += f": {'uniform' if uniform else 'sampler'}"
-    sections.insert(1, "## Information in the feature sets\n\nKish's ESS of each specimen's "
-                    "normalised weights (1 = one point carries all the weight) and the weighted "
-                    "standard deviation of its parameters (median over specimens of the mean "
-                    "over the three axes; a uniform cube gives 0.289). Where the ESS is about 1 "
-                    "the covariance-based distances (Chernoff, Bhattacharyya, KL, "
-                    "Patrick-Fisher, Mahalanobis) compare the spread of a few points, i.e. "
-                    "noise. Unevolved sets against the power λ on their target weights, "
-                    "evolved sets under their two weightings; ← marks the tables' setting "
-                    f"(`grid_power` = {lam:g}, `evolved_weights` = {weights}).\n\n"
-                    + markdown_table(
-                        ["brdf", "set", "λ / weights", "median ESS", "min ESS",
-                         f"ESS < {10 * _DIM}", "median sd"], ess_rows))
+            sections.append(_error_table(brdf, kind, posts, lm_best, classes, config,
+                                         matrices, summary_rows))
+        figs.append(_similarity_figure(brdf, matrices, classes, out_dir))
+    sections.insert(1, _information_section(config, uniform, lam, ess_rows))
     sections += [f"![{f}]({f})" for f in figs]
     write_report(out_dir, "Material classification on a synthetic benchmark "
                  "(thesis Tables 8.3-8.11)", sections)
     return markdown_table(["brdf", "sets", "measure", "Miss", "WNN", "NN1", "1-NN acc."],
                           summary_rows)
+
+
+def _specimens(results: list[xr.Dataset], brdf: str) -> tuple[list[xr.Dataset], np.ndarray]:
+    """The trials of model ``brdf`` by material then specimen, and their materials."""
+    group = [ds for ds in results if json.loads(ds.attrs["cell"])["brdf"] == brdf]
+    cells = [json.loads(ds.attrs["cell"]) for ds in group]
+    order = sorted(range(len(group)), key=lambda i: (cells[i]["material"],
+                                                     cells[i]["specimen"]))
+    return [group[i] for i in order], np.array([cells[i]["material"] for i in order])
+
+
+def _error_table(brdf: str, kind: str, posts: list[xr.Dataset], lm_best: np.ndarray,
+                 classes: np.ndarray, config: dict, matrices: dict,
+                 summary_rows: list) -> str:
+    """One table of the report: Miss/WNN/NN1/accuracy per distance column, the thesis's
+    counts beneath; each similarity matrix goes into ``matrices``, each column's numbers
+    into ``summary_rows``."""
+    from scipy.spatial.distance import cdist
+
+    from mrfpe.classify import error_stats, knn_accuracy, similarity_matrix
+
+    header, stats = ["statistic"], {"miss": [], "wnn": [], "nn1": [], "acc": []}
+    for label, name, params in _columns(kind, config):
+        if name == "lm512":
+            S = -cdist(lm_best, lm_best)
+        else:
+            S = similarity_matrix(posts, name, n_jobs=config["summary_jobs"], **params)
+        matrices[(kind, label)] = S
+        st = error_stats(S, classes)
+        header.append(label)
+        for k in ("miss", "wnn", "nn1"):
+            stats[k].append(st[k])
+        stats["acc"].append(knn_accuracy(S, classes))
+        summary_rows.append([brdf, kind, label, st["miss"], st["wnn"], st["nn1"],
+                             stats["acc"][-1]])
+    rows = [["Miss", *stats["miss"]], ["WNN", *stats["wnn"]], ["NN1", *stats["nn1"]],
+            ["1-NN acc.", *(f"{a:.2f}" for a in stats["acc"])]]
+    ref = CLASSIFICATION.get((brdf, kind))
+    if ref is not None:
+        lookup = dict(zip(ref["columns"], range(len(ref["columns"]))))
+        for k, shown in (("miss", "Miss"), ("wnn", "WNN"), ("nn1", "NN1")):
+            rows.append([f"*thesis {shown}*",
+                         *(f"*{ref[k][lookup[h]]}*" if h in lookup else "–"
+                           for h in header[1:])])
+    table_no = f" (thesis Table {ref['table']})" if ref else ""
+    return (f"## {brdf}: {_TABLE_TITLES[kind]}{table_no}\n\n{len(posts)} specimens, "
+            f"{len(set(classes.tolist()))} materials.\n\n" + markdown_table(header, rows))
+
+
+def _similarity_figure(brdf: str, matrices: dict, classes: np.ndarray, out_dir: Path) -> str:
+    """Heat-maps of the :data:`_PICTURED` similarity matrices; the PNG's file name."""
+    from mrfpe.classify import plot_similarity
+
+    picks = [p for p in _PICTURED if p in matrices]
+    fig, axes = new_figure(1, len(picks), size=(4.6 * len(picks), 4.2))
+    for ax, (kind, label) in zip(axes[0], picks):
+        plot_similarity(_ranks(matrices[(kind, label)]), classes, ax=ax,
+                        title=f"{kind}: {label}", colorbar=False)
+    fig.suptitle(f"Similarity matrices, {brdf}, shown as ranks of the off-diagonal "
+                 "entries (Tables 8.3-8.5 as pictures)", fontsize=9)
+    return save_figure(fig, out_dir / f"similarity_{brdf}.png")
+
+
+def _information_section(config: dict, uniform: bool, lam: float, ess_rows: list) -> str:
+    """The report's section on how much information each feature set holds."""
+    weights = config["evolved_weights"]
+    if weights == "auto":  # name what it resolved to
+        weights += f": {'uniform' if uniform else 'sampler'}"
+    return ("## Information in the feature sets\n\nKish's ESS of each specimen's "
+            "normalised weights (1 = one point carries all the weight) and the weighted "
+            "standard deviation of its parameters (median over specimens of the mean "
+            "over the three axes; a uniform cube gives 0.289). Where the ESS is about 1 "
+            "the covariance-based distances (Chernoff, Bhattacharyya, KL, "
+            "Patrick-Fisher, Mahalanobis) compare the spread of a few points, i.e. "
+            "noise. Unevolved sets against the power λ on their target weights, "
+            "evolved sets under their two weightings; ← marks the tables' setting "
+            f"(`grid_power` = {lam:g}, `evolved_weights` = {weights}).\n\n"
+            + markdown_table(["brdf", "set", "λ / weights", "median ESS", "min ESS",
+                              f"ESS < {10 * _DIM}", "median sd"], ess_rows))
 
 
 STUDY = Study(

@@ -53,9 +53,8 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from mrfpe.studies._thesis import PMC_TABLE_NAMES, PMC_TABLES
-from mrfpe.studies.report import markdown_table, new_figure, save_figure, write_report
-from mrfpe.studies.synthetic import (
+from mrfpe.experiments._thesis import PMC_TABLE_NAMES, PMC_TABLES
+from mrfpe.experiments.problems import (
     DEFAULTS,
     QUICK,
     check_problem,
@@ -69,6 +68,7 @@ from mrfpe.studies.synthetic import (
     settings,
     weight_variance,
 )
+from mrfpe.experiments.writeup import markdown_table, new_figure, save_figure, write_report
 from mrfpe.study import Setting, Study, by_cell
 
 #: PMC's variants (:class:`mrfpe.samplers.pmc.PMC`): Cappé-style mixture, thesis (II), (I).

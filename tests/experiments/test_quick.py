@@ -34,7 +34,7 @@ def triangle(ds: xr.Dataset, to_truth: str, to_max: str) -> None:
 
 
 def check_importance_sampling(results, cfg):
-    from mrfpe.studies.importance_sampling import asymptotic_rmse
+    from mrfpe.experiments.importance_sampling import asymptotic_rmse
 
     for n in cfg["n_samples"]:
         err = np.stack([ds["error"].values for ds in results

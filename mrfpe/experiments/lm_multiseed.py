@@ -58,8 +58,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from mrfpe.studies.report import markdown_table, new_figure, save_figure, write_report
-from mrfpe.studies.synthetic import (
+from mrfpe.experiments.problems import (
     DEFAULTS,
     QUICK,
     check_problem,
@@ -70,6 +69,7 @@ from mrfpe.studies.synthetic import (
     problem_from_config,
     settings,
 )
+from mrfpe.experiments.writeup import markdown_table, new_figure, save_figure, write_report
 from mrfpe.study import Setting, Study, by_cell
 
 RANKINGS = ("lm_cost", "pseudolikelihood")

@@ -37,8 +37,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from mrfpe.studies.report import markdown_table, mean_sd, new_figure, save_figure, write_report
-from mrfpe.studies.synthetic import (
+from mrfpe.experiments.problems import (
     DEFAULTS,
     QUICK,
     check_problem,
@@ -51,6 +50,7 @@ from mrfpe.studies.synthetic import (
     sampler_names,
     settings,
 )
+from mrfpe.experiments.writeup import markdown_table, mean_sd, new_figure, save_figure, write_report
 from mrfpe.study import Setting, Study, by_cell
 
 #: The steps at which the report's table reads the curves (700 ≈ PMC 64 × 20 /

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from mrfpe.studies.classification import STUDY, summarise
+from mrfpe.experiments.classification import STUDY, summarise
 
 
 def _fake_trial(material: int, specimen: int, rng: np.random.Generator) -> xr.Dataset:
@@ -76,7 +76,7 @@ def test_defaults_temper_the_grid_and_flatten_the_cloud():
 
     cfg = resolve_config(STUDY)
     assert cfg["grid_power"] == 1e-4 and cfg["evolved_weights"] == "auto"
-    from mrfpe.studies.classification import _uniform_cloud
+    from mrfpe.experiments.classification import _uniform_cloud
 
     assert _uniform_cloud(cfg)  # PMC (II): its pi are not importance weights
     assert not _uniform_cloud({**cfg, "pmc": {"variant": "mixture"}})

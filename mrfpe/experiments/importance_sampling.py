@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from mrfpe.studies.report import markdown_table, new_figure, save_figure, write_report
+from mrfpe.experiments.writeup import markdown_table, new_figure, save_figure, write_report
 from mrfpe.study import Setting, Study, by_cell
 
 

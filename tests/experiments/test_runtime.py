@@ -7,7 +7,7 @@ import json
 import numpy as np
 import xarray as xr
 
-from mrfpe.studies.runtime import _with_range, ratio_table
+from mrfpe.experiments.runtime import _with_range, ratio_table
 from mrfpe.study import by_cell
 
 RUNS = ["pmc", "pmc_thesis2", "dw_r", "lm_multiseed"]

@@ -7,7 +7,7 @@ import json
 import numpy as np
 import xarray as xr
 
-from mrfpe.studies.dw_convergence import spread_table
+from mrfpe.experiments.dw_convergence import spread_table
 
 
 def _trial(final: tuple[float, float]) -> xr.Dataset:

@@ -2,7 +2,7 @@
 
 import pytest
 
-from mrfpe.studies.pmc_convergence import check_config, variant_options
+from mrfpe.experiments.pmc_convergence import check_config, variant_options
 from mrfpe.study import get, resolve_config
 
 

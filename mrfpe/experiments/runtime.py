@@ -32,9 +32,8 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from mrfpe.studies._thesis import RUNTIME_MINUTES
-from mrfpe.studies.report import markdown_table, new_figure, save_figure, write_report
-from mrfpe.studies.synthetic import (
+from mrfpe.experiments._thesis import RUNTIME_MINUTES
+from mrfpe.experiments.problems import (
     SURFACES,
     check_runs,
     check_target_options,
@@ -47,6 +46,7 @@ from mrfpe.studies.synthetic import (
     sample_traced,
     settings,
 )
+from mrfpe.experiments.writeup import markdown_table, new_figure, save_figure, write_report
 from mrfpe.study import Setting, Study, by_cell
 
 
@@ -68,7 +68,7 @@ RUNS = {
     "dw_r": {"sampler": "dw_r", "n_steps": 20000},
     "dw_q": {"sampler": "dw_q", "n_steps": 20000},
     # each seed to convergence: the reading of Table 8.12's "10 iterations" that reproduces
-    # the thesis's LM results (mrfpe.studies.lm_multiseed)
+    # the thesis's LM results (mrfpe.experiments.lm_multiseed)
     "lm_multiseed": {"sampler": "lm_multiseed", "n_seeds": 512},
     "nlopt_multiseed": {"sampler": "nlopt_multiseed", "n_seeds": 512},
     "mh": {"sampler": "mh"},

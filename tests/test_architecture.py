@@ -226,7 +226,7 @@ def test_no_private_name_crosses_a_subpackage(path):
 
 #: Applications built on the library: they may use the package root's front door
 #: (``mrfpe.sample``, ``mrfpe.distance``); the library's layers never import it.
-APPLICATIONS = ("mrfpe.__main__", "mrfpe.cli", "mrfpe.demo", "mrfpe.studies")
+APPLICATIONS = ("mrfpe.__main__", "mrfpe.cli", "mrfpe.demo", "mrfpe.experiments")
 
 
 def test_only_applications_import_the_package_root(graph):

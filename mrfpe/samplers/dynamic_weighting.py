@@ -82,18 +82,27 @@ def dw_update(kind: str, log_pi: np.ndarray, log_r: np.ndarray, log_u: np.ndarra
 
     Parameters
     ----------
-    kind : ``"q"`` (5.48) or ``"r"`` (5.49).
-    log_pi : (C,) current log weights log Π.
-    log_r : (C,) log Metropolis ratio log r(x, y) of 5.47 (−inf when ϱ(y) = 0).
-    log_u : (C,) log of the U(0, 1) draws.
-    theta : the θ ≥ 0 of 5.48/5.49.
-    a : the Q-type rejection multiplier (> 1).
-    log_v : log of the stabilising multiplier V of 5.5.4, added to every new weight.
+    kind : str
+        ``"q"`` (5.48) or ``"r"`` (5.49).
+    log_pi : numpy.ndarray
+        (C,) current log weights log Π.
+    log_r : numpy.ndarray
+        (C,) log Metropolis ratio log r(x, y) of 5.47 (−inf when ϱ(y) = 0).
+    log_u : numpy.ndarray
+        (C,) log of the U(0, 1) draws.
+    theta : float
+        The θ ≥ 0 of 5.48/5.49.
+    a : float
+        The Q-type rejection multiplier (> 1).
+    log_v : numpy.ndarray or float
+        Log of the stabilising multiplier V of 5.5.4, added to every new weight.
 
     Returns
     -------
-    accept : (C,) bool, whether the chain moves to y.
-    log_pi_new : (C,) the new log weights.
+    accept : numpy.ndarray
+        (C,) bool, whether the chain moves to y.
+    log_pi_new : numpy.ndarray
+        (C,) the new log weights.
     """
     log_pi = np.asarray(log_pi, dtype=np.float64)
     log_pr = log_pi + np.asarray(log_r, dtype=np.float64)

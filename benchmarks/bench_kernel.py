@@ -167,20 +167,24 @@ def ns_per_eval(targets: dict, n: int, repeat: int) -> dict:
 
 @contextmanager
 def _today(kernel: str):
-    """``"classic"``: today's code path (classic kernel, NumPy mixture density in PMC, BLAS
-    on its own thread count)."""
-    import mrfpe.samplers.pmc as pmc_mod
-    from mrfpe import threads
-    from mrfpe.mixture import log_mixture_density, log_mixture_density_numpy
+    """``"classic"``: the earlier code path (classic kernel, NumPy mixture density in PMC,
+    BLAS on its own thread count); ``"lean"``: today's defaults.
 
-    today = kernel == "classic"
-    pmc_mod.log_mixture_density = log_mixture_density_numpy if today else log_mixture_density
+    PMC's jitter kernels look the mixture density up in :mod:`mrfpe.mixture` at each call,
+    so replacing it there switches every sampler that uses the kit.
+    """
+    from mrfpe import mixture, threads
+
+    classic = kernel == "classic"
+    numba_density = mixture.log_mixture_density
+    mixture.log_mixture_density = (mixture.log_mixture_density_numpy if classic
+                                   else numba_density)
     blas = threads.BLAS_THREADS
-    threads.BLAS_THREADS = None if today else blas
+    threads.BLAS_THREADS = None if classic else blas
     try:
         yield
     finally:
-        pmc_mod.log_mixture_density = log_mixture_density
+        mixture.log_mixture_density = numba_density
         threads.BLAS_THREADS = blas
 
 

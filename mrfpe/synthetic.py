@@ -246,7 +246,7 @@ def _checked_settings(brdf: str, theta: Any, shape: Any, n_labels: Any, surface:
     seed = check_seed(seed)
     # B >= 2: with one label the pseudolikelihood is identically 0 (no alternative label)
     B = _int_param(n_labels, "n_labels", 2)
-    from mrfpe.targets.budget import check_memory
+    from mrfpe.budget import check_memory
 
     # per node: the label ranges, the range prior and beliefs (B floats each) and a dozen
     # per-pixel working arrays (normals, shading, the range map): checked before any

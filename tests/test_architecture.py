@@ -22,11 +22,29 @@ import pytest
 
 grimp = pytest.importorskip("grimp")
 
-#: Modules every layer may use; they import no other mrfpe module. (``mrfpe.mixture``
-#: is not one: its numba kernel uses the vectorised exp/log of ``mrfpe.targets.kernels``.)
-LEAVES = ("mrfpe.validation", "mrfpe.resampling", "mrfpe.threads", "mrfpe.checksum")
-#: Modules that import leaves only (the netCDF reader verifies checksums).
-NEAR_LEAVES = ("mrfpe.netcdf",)
+#: The layers of docs/architecture.md, top to bottom, as first-level modules of ``mrfpe``:
+#: a module imports only from layers below its own (and, where ``independent=False``,
+#: from its own layer's other modules). The leaves import no mrfpe module at all.
+LAYERS = (
+    ("applications", ("__main__", "cli", "demo", "warmup", "experiments")),
+    ("studies", ("study",)),
+    ("conformance", ("testing",)),
+    ("samplers", ("samplers", "classify")),
+    ("distances", ("distances",)),
+    ("targets and models", ("targets", "models")),
+    ("domain", ("posterior", "mixture", "scene", "synthetic", "stereo", "shading",
+                "lattice", "brdf", "geometry", "_arviz")),
+    ("engine", ("engine",)),
+    ("registries and files", ("_plugins", "netcdf")),
+    ("leaves", ("validation", "resampling", "threads", "budget", "checksum", "_caller",
+                "_terminal", "_version")),
+)
+#: Leaves inside a subpackage (a layer holds whole first-level modules only).
+INNER_LEAVES = ("mrfpe.engine.fastmath",)
+
+
+def _grimp_layers(layers=LAYERS):
+    return [grimp.Layer(*tails, independent=name == "leaves") for name, tails in layers]
 
 
 @pytest.fixture(scope="module")
@@ -97,14 +115,32 @@ def test_cycle_finder_sees_a_cycle():
     assert _cycles(g) == [["pkg.a", "pkg.b"]]
 
 
-@pytest.mark.parametrize("leaf", LEAVES)
-def test_leaf_modules_import_no_mrfpe_module(graph, leaf):
+def _layer_violations(graph, layers=LAYERS) -> list[str]:
+    found = graph.find_illegal_dependencies_for_layers(layers=_grimp_layers(layers),
+                                                       containers={"mrfpe"})
+    return sorted(f"{d.importer} -> {d.imported}" for d in found)
+
+
+def test_imports_go_down_the_layers(graph):
+    assert _layer_violations(graph) == []
+
+
+def test_every_module_has_a_layer(graph):
+    placed = {f"mrfpe.{tail}" for _, tails in LAYERS for tail in tails}
+    assert graph.find_children("mrfpe") - placed == set(), "add it to LAYERS and the docs"
+
+
+def test_layer_checker_sees_an_upward_import(graph):
+    """The checker itself: swapping two layers turns their real imports into violations."""
+    swapped = list(LAYERS)
+    i = [name for name, _ in LAYERS].index("engine")
+    swapped[i - 1], swapped[i] = swapped[i], swapped[i - 1]
+    assert any(v.startswith("mrfpe.") for v in _layer_violations(graph, tuple(swapped)))
+
+
+@pytest.mark.parametrize("leaf", INNER_LEAVES)
+def test_inner_leaves_import_no_mrfpe_module(graph, leaf):
     assert {m for m in _edges(graph, leaf) if m.startswith("mrfpe")} == set()
-
-
-@pytest.mark.parametrize("module", NEAR_LEAVES)
-def test_near_leaves_import_leaves_only(graph, module):
-    assert {m for m in _edges(graph, module) if m.startswith("mrfpe")} <= set(LEAVES)
 
 
 def test_library_never_imports_the_cli(graph):
@@ -174,7 +210,7 @@ def frozen_escapes(tree: ast.Module) -> list[int]:
 
 
 def _subpackage(module: str) -> str:
-    """First-level subpackage of a module (``mrfpe.targets.lean`` -> ``mrfpe.targets``);
+    """First-level subpackage of a module (``mrfpe.targets.base`` -> ``mrfpe.targets``);
     top-level modules (``mrfpe.scene``) belong to ``mrfpe``, a plugin to itself."""
     parts = module.split(".")
     if parts[0] == "mrfpe" and len(parts) > 1 and (ROOT / "mrfpe" / parts[1]).is_dir():

@@ -1,60 +1,6 @@
-"""Kernels compile before a progress bar starts, and a slow first call says so once."""
+"""``mrfpe warmup`` fills numba's cache of the numerical kernels."""
 
-import numpy as np
-
-from mrfpe import warmup
-
-
-class _Slow:
-    """A target whose first evaluation is slow, like a numba kernel compiling."""
-
-    bounds = np.array([[0.0, 1.0], [0.0, 1.0]])
-    param_names = ("a", "b")
-
-    def __init__(self, seconds: float):
-        self.seconds, self.calls = seconds, 0
-
-    def log_prob(self, theta):
-        import time
-
-        self.calls += 1
-        if self.calls == 1:
-            time.sleep(self.seconds)
-        return np.zeros(np.atleast_2d(theta).shape[0])
-
-
-def test_warm_target_reports_a_slow_first_call(monkeypatch):
-    monkeypatch.setattr(warmup, "REPORT_AFTER_S", 0.05)
-    monkeypatch.setattr(warmup, "kernels_cached", lambda: True)
-    said: list[str] = []
-    target = _Slow(0.1)
-    assert warmup.warm_target(target, said.append) >= 0.1
-    assert target.calls == 2 and len(said) == 1 and "kernels ready in" in said[0]
-
-
-def test_warm_target_announces_a_cold_cache(monkeypatch):
-    monkeypatch.setattr(warmup, "kernels_cached", lambda: False)
-    said: list[str] = []
-    warmup.warm_target(_Slow(0.0), said.append)
-    assert said and said[0].startswith("compiling numerical kernels (first run only")
-
-
-def test_fast_warm_target_is_silent(monkeypatch):
-    monkeypatch.setattr(warmup, "kernels_cached", lambda: True)
-    said: list[str] = []
-    warmup.warm_target(_Slow(0.0), said.append)
-    assert said == []
-
-
-def test_progress_bar_starts_after_the_warm_up(monkeypatch):
-    """The sampler's run log evaluates the target before its bar: the ETA excludes it."""
-    from mrfpe.samplers.kit import Run
-
-    calls: list[str] = []
-    monkeypatch.setattr(warmup, "warm_target", lambda t: calls.append("warm") or 0.0)
-    Run(_Slow(0.0), 3, progress=True)._bar.close()
-    Run(_Slow(0.0), 3, progress=False)
-    assert calls == ["warm"]
+from mrfpe.samplers.kit.warm import kernels_cached
 
 
 def test_warmup_command_fills_the_cache(capsys):
@@ -62,4 +8,4 @@ def test_warmup_command_fills_the_cache(capsys):
 
     assert main(["warmup"]) == 0
     assert "done in" in capsys.readouterr().out
-    assert warmup.kernels_cached()
+    assert kernels_cached()

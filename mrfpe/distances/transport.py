@@ -31,8 +31,8 @@ from typing import Any, ClassVar
 import numpy as np
 from scipy.spatial.distance import cdist
 
+from mrfpe.budget import check_memory
 from mrfpe.distances.base import Distance, SampleSet
-from mrfpe.targets.budget import check_memory
 from mrfpe.validation import check_positive_int, check_range
 
 __all__ = ["EMD", "SlicedWasserstein"]

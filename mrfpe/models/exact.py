@@ -32,8 +32,8 @@ Methods
     9.4.3). With induced width ``w`` the largest factor has ``q^(w+1)`` entries
     per psi row and a call costs ``O(N sum_steps q^|scope|) <= O(N n q^(w+1))``.
     Refused (ValueError) above :data:`MAX_FACTOR_ENTRIES` entries, or
-    (:class:`~mrfpe.targets.budget.MemoryBudgetError`) when one psi row's working
-    memory exceeds :func:`~mrfpe.targets.budget.memory_budget`; batches are
+    (:class:`~mrfpe.budget.MemoryBudgetError`) when one psi row's working
+    memory exceeds :func:`~mrfpe.budget.memory_budget`; batches are
     evaluated in chunks of at most ``WORKING_CHUNK_BYTES``.
 ``"auto"``
     Enumeration when ``q^n <= MAX_ENUMERATION`` and ``q^n`` is at most the
@@ -56,9 +56,9 @@ from itertools import combinations, pairwise
 import numpy as np
 from scipy.special import logsumexp
 
+from mrfpe.budget import check_memory, chunk_rows
 from mrfpe.models.design import Design, unique_rows
 from mrfpe.models.graph import Graph
-from mrfpe.targets.budget import check_memory, chunk_rows
 
 __all__ = ["MAX_ENUMERATION", "MAX_FACTOR_ENTRIES", "LogPartition"]
 

@@ -49,7 +49,6 @@ from mrfpe.models.mixing import autocorrelation_time
 from mrfpe.samplers.base import Callback, Sampler, check_positive_int, check_range
 from mrfpe.samplers.kit import (
     AdaptiveRandomWalk,
-    check_bool,
     check_chain_length,
     check_target,
     evaluate_inside,
@@ -121,11 +120,8 @@ class Exchange(Sampler):
                  max_aux_sweeps: int = 2000, mixing_factor: float = 5.0):
         self.n_steps, self.burn_in, self.thin = check_chain_length(n_steps, burn_in, thin)
         self.n_chains = check_positive_int("n_chains", n_chains)
-        self.proposal_sd = check_range("proposal_sd", proposal_sd, 0.0, np.inf,
-                                       low_open=True, high_open=True)
-        self.adapt = check_bool("adapt", adapt)
-        self.target_acceptance = check_range("target_acceptance", target_acceptance, 0.0, 1.0,
-                                             low_open=True, high_open=True)
+        self.proposal_sd, self.adapt, self.target_acceptance = AdaptiveRandomWalk.check_options(
+            proposal_sd, adapt, target_acceptance)
         if aux_sweeps != "auto":
             aux_sweeps = check_positive_int("aux_sweeps", aux_sweeps)
         self.aux_sweeps = aux_sweeps

@@ -24,10 +24,9 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from mrfpe.samplers.base import Callback, Sampler, check_positive_int, check_range
+from mrfpe.samplers.base import Callback, Sampler, check_positive_int
 from mrfpe.samplers.kit import (
     AdaptiveRandomWalk,
-    check_bool,
     check_chain_length,
     evaluate_inside,
     metropolis_accept,
@@ -68,11 +67,8 @@ class MetropolisHastings(Sampler):
                  target_acceptance: float = 0.234):
         self.n_steps, self.burn_in, self.thin = check_chain_length(n_steps, burn_in, thin)
         self.n_chains = check_positive_int("n_chains", n_chains)
-        self.proposal_sd = check_range("proposal_sd", proposal_sd, 0.0, np.inf,
-                                       low_open=True, high_open=True)
-        self.adapt = check_bool("adapt", adapt)
-        self.target_acceptance = check_range("target_acceptance", target_acceptance, 0.0, 1.0,
-                                             low_open=True, high_open=True)
+        self.proposal_sd, self.adapt, self.target_acceptance = AdaptiveRandomWalk.check_options(
+            proposal_sd, adapt, target_acceptance)
 
     def run(self, target: Any, *, seed: int | None, progress: bool = False,
             callback: Callback | None = None):

@@ -10,10 +10,10 @@ from typing import Any
 
 import numpy as np
 
+from mrfpe.budget import check_memory
 from mrfpe.study.config import canonical
 from mrfpe.study.resolve import config_hash
 from mrfpe.study.spec import Study
-from mrfpe.targets.budget import check_memory
 
 __all__ = ["Task", "tasks", "trial_seed"]
 

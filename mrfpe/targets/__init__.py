@@ -24,8 +24,8 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
+from mrfpe.budget import MemoryBudgetError, memory_budget, set_memory_budget
 from mrfpe.targets.base import Target, as_theta_batch
-from mrfpe.targets.budget import MemoryBudgetError, memory_budget, set_memory_budget
 from mrfpe.targets.maximise import maximise
 from mrfpe.targets.options import Option, describe_options, resolve_options
 from mrfpe.targets.softening import Softened, softened

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from mrfpe.targets.budget import check_memory, chunk_rows
+from mrfpe.budget import check_memory, chunk_rows
 from mrfpe.validation import check_bool
 
 __all__ = ["Target", "as_theta_batch"]
@@ -91,7 +91,7 @@ class Target:
         Notes
         -----
         The batch is evaluated in chunks whose working memory stays below
-        :data:`mrfpe.targets.budget.WORKING_CHUNK_BYTES`; a batch whose input,
+        :data:`mrfpe.budget.WORKING_CHUNK_BYTES`; a batch whose input,
         output and one chunk would exceed :func:`mrfpe.targets.memory_budget`
         raises :class:`mrfpe.targets.MemoryBudgetError` before any evaluation.
         NaN values are returned as ``-inf``.

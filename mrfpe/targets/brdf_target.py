@@ -31,11 +31,11 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from mrfpe.budget import check_memory
 from mrfpe.engine import DTYPES, KERNELS, DataTables, evaluate, lean_tables, make_plan, make_tables
 from mrfpe.lattice import split_ids
 from mrfpe.targets import reflectance
 from mrfpe.targets.base import Target, as_theta_batch
-from mrfpe.targets.budget import check_memory
 from mrfpe.targets.energy import DATA_TERMS
 from mrfpe.targets.options import (
     Option,

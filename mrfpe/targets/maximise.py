@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from mrfpe.targets.budget import check_memory
+from mrfpe.budget import check_memory
 from mrfpe.validation import check_seed
 
 __all__ = ["METHODS", "grid_points", "maximise"]

@@ -17,8 +17,8 @@ from typing import Any
 
 import numpy as np
 
+from mrfpe.budget import check_memory
 from mrfpe.engine import DataTables, LeanTables, lean_tables
-from mrfpe.targets.budget import check_memory
 from mrfpe.targets.energy import build_tables
 
 __all__ = ["estimate_table_bytes", "fingerprint", "lean_tables_for", "tables_for"]
@@ -57,7 +57,7 @@ def tables_for(scene: Any, data_term: str, dtype: str = "float64", *,
     """Data tables of ``scene``, shared by every target built on the same scene.
 
     A build whose :func:`estimate_table_bytes` exceeds the memory budget raises
-    :class:`mrfpe.targets.budget.MemoryBudgetError` before it starts.
+    :class:`mrfpe.budget.MemoryBudgetError` before it starts.
     """
     fp = fingerprint(scene)
     per_scene = _TABLE_CACHE.setdefault(scene, {})

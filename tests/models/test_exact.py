@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 from scipy.special import logsumexp
 
+from mrfpe.budget import MemoryBudgetError, chunk_rows, set_memory_budget
 from mrfpe.models.discrete import MRF, Potential
 from mrfpe.models.exact import MAX_ENUMERATION, MAX_FACTOR_ENTRIES, LogPartition
 from mrfpe.models.graph import from_adjacency, lattice
 from mrfpe.models.terms import Coupling, EdgeCovariate, Field, NodeCovariate
-from mrfpe.targets.budget import MemoryBudgetError, chunk_rows, set_memory_budget
 
 ISING = dict(n_states=2, terms=[Coupling("product"), Field("value")], state_values=(-1, 1))
 
@@ -259,7 +259,7 @@ def test_chunked_batches_equal_one_pass(monkeypatch):
     lz = LogPartition(design, "eliminate")
     psi = design.psi(np.random.default_rng(2).normal(size=(37, len(names))))
     whole = lz(psi)
-    monkeypatch.setattr("mrfpe.targets.budget.WORKING_CHUNK_BYTES", 2 * lz._row_bytes)
+    monkeypatch.setattr("mrfpe.budget.WORKING_CHUNK_BYTES", 2 * lz._row_bytes)
     assert len(chunk_rows(37, lz._row_bytes, minimum=1)) > 10
     np.testing.assert_allclose(lz(psi), whole, rtol=1e-15, atol=0)
     assert lz(psi[:0]).shape == (0,)

@@ -73,6 +73,9 @@ Weights and resampling
 Concurrent optimisations
     :func:`map_batched` (multi-start local optimisers whose inner loop asks for one
     point at a time: threads, one batched evaluation when all wait).
+Compilation
+    :func:`warm_target` (evaluate a target once, compiling its kernels, before a
+    progress bar or a clock starts; :class:`Run` calls it when ``progress=True``).
 """
 
 from __future__ import annotations
@@ -121,6 +124,7 @@ from mrfpe.samplers.kit.random_walk import (
     random_walk_proposal,
 )
 from mrfpe.samplers.kit.runlog import Run
+from mrfpe.samplers.kit.warm import warm_target
 from mrfpe.validation import (
     check_bool,
     check_choice,
@@ -178,4 +182,5 @@ __all__ = [
     "softened",
     "space_filling",
     "start_chains",
+    "warm_target",
 ]

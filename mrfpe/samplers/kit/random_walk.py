@@ -18,6 +18,8 @@ from typing import Any
 
 import numpy as np
 
+from mrfpe.validation import check_bool, check_range
+
 __all__ = ["AdaptiveRandomWalk", "evaluate_inside", "in_box", "metropolis_accept",
            "random_walk_proposal"]
 
@@ -93,6 +95,17 @@ class AdaptiveRandomWalk:
         self.chol = np.diag(proposal_sd * (self.hi - self.lo))
         self.log_scale, self._shaped = 0.0, False
         self._burn = np.empty((burn_in, n_chains, self.d)) if adapt else None
+
+    @staticmethod
+    def check_options(proposal_sd: float, adapt: bool, target_acceptance: float,
+                      ) -> tuple[float, bool, float]:
+        """Validate a sampler's random-walk options: ``proposal_sd`` > 0 (a fraction of each
+        parameter's range), ``adapt`` a bool, ``target_acceptance`` in (0, 1)."""
+        return (check_range("proposal_sd", proposal_sd, 0.0, np.inf, low_open=True,
+                            high_open=True),
+                check_bool("adapt", adapt),
+                check_range("target_acceptance", target_acceptance, 0.0, 1.0, low_open=True,
+                            high_open=True))
 
     @property
     def scale(self) -> float:

@@ -17,8 +17,9 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
+from mrfpe.budget import check_memory
 from mrfpe.posterior import build
-from mrfpe.targets.budget import check_memory
+from mrfpe.samplers.kit.warm import warm_target
 
 __all__ = ["Run"]
 
@@ -32,7 +33,7 @@ class Run:
     n_steps : number of steps, for the progress bar (None when not known in advance).
     progress : show a tqdm bar (stderr) with the step's ESS and extra info; the
         target is evaluated once before the bar starts, so that compiling its
-        kernels (:func:`mrfpe.warmup.warm_target`) counts neither in the ETA nor in
+        kernels (:func:`mrfpe.samplers.kit.warm.warm_target`) counts neither in the ETA nor in
         the posterior's ``wall_time_s``.
     callback : ``callback(step, info)`` after each step; ``info`` holds ``ess``,
         ``map_log_target``, ``n_target_evals`` and the sampler's extras.
@@ -69,8 +70,6 @@ class Run:
         self._bar = None
         if progress:
             from tqdm.auto import tqdm
-
-            from mrfpe.warmup import warm_target
 
             warm_target(target)  # compile before the bar, whose ETA would count it 20-fold
             self.t0 = time.perf_counter()  # and before the clock: compiling is not sampling

@@ -131,7 +131,7 @@ def check_memory(nbytes: float, what: str, hint: str = "") -> None:
         raise MemoryBudgetError(
             f"{what} needs about {format_bytes(nbytes)}, more than the memory budget of "
             f"{format_bytes(budget)}{'; ' + hint if hint else ''} (raise it with "
-            f"mrfpe.targets.set_memory_budget(...) or {_ENV}=...)")
+            f"mrfpe.budget.set_memory_budget(...) or {_ENV}=...)")
 
 
 def chunk_rows(n_rows: int, bytes_per_row: float, minimum: int = 16) -> list[slice]:

@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 import mrfpe.targets as T
+from mrfpe import budget
 from mrfpe.synthetic import make_scene
-from mrfpe.targets import MemoryBudgetError, budget, get, set_memory_budget
+from mrfpe.targets import MemoryBudgetError, get, set_memory_budget
 
 
 @pytest.fixture
@@ -89,7 +90,7 @@ def test_build_progress(scene, capsys):
 
 
 def test_a_bare_one_is_one_byte_not_all_ram():
-    from mrfpe.targets.budget import _physical_ram, parse_bytes
+    from mrfpe.budget import _physical_ram, parse_bytes
 
     assert parse_bytes("1") == 1 and parse_bytes(1) == 1
     assert parse_bytes("1.0") == parse_bytes(1.0) == _physical_ram()

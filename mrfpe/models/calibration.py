@@ -129,7 +129,8 @@ def fisher_information(lik: Any, draws: Draws) -> np.ndarray:
     """``I(θ) = M Cov_k[∇ log f(y_k | θ)]`` (d, d) at the draws' θ (M observations).
 
     Raises ValueError naming the parameter whose score does not vary (a singular
-    information: the data cannot identify it).
+    information: every draw at this θ has the same statistic -- e.g. uniform lattices
+    on the coupling's bound -- or the data cannot identify the parameter).
     """
     s = _scores(lik, draws.theta, draws.y, _step(lik, draws.theta))
     cov = np.atleast_2d(np.cov(s, rowvar=False))
@@ -140,7 +141,8 @@ def fisher_information(lik: Any, draws: Draws) -> np.ndarray:
     if flat.size:
         raise ValueError(f"the Fisher information is singular at theta {draws.theta.tolist()}: "
                          f"the score of {names[flat[0]]!r} does not vary over "
-                         f"{draws.y.shape[0]} simulations (the data cannot identify it)")
+                         f"{draws.y.shape[0]} simulations (the model is degenerate at this "
+                         f"theta, or the data cannot identify the parameter)")
     w = np.linalg.eigvalsh(info)
     if w[0] <= 1e-10 * w[-1]:
         raise ValueError(f"the Fisher information is singular at theta {draws.theta.tolist()} "
@@ -166,12 +168,21 @@ class MLEResult:
 
 
 def mcmc_mle(lik: Any, theta0: Any, *, n_draws: int = 1000, max_iter: int = 10,
-             tol: float = 0.05, seed: int = 0) -> MLEResult:
+             tol: float = 0.05, seed: int = 0, metric: np.ndarray | None = None,
+             max_step: float = 1.0) -> MLEResult:
     """Geyer-Thompson Monte Carlo MLE from ``theta0``, iterated (see the module docstring).
 
     Stops when a step moves less than ``tol`` asymptotic standard errors in every
     coordinate (``converged``) or after ``max_iter`` rounds of ``n_draws`` draws.
+
+    ``metric`` (d, d), positive definite -- for :class:`AdjustedPL` the PL's negative
+    Hessian at the MPLE -- limits each round's move ``Δ`` to ``sqrt(Δᵀ metric Δ) <=
+    max_step``. The importance weights' ESS alone does not: draws that stay in one
+    phase of a model near its critical coupling reweight smoothly to parameters whose
+    lattices live in the other phase, and the undamped iterate then jumps between
+    phases onto the box's face (measured on 10 x 10 Ising data sets at coupling 0.44).
     """
+    A = None if metric is None else np.asarray(metric, dtype=np.float64)
     rng = np.random.default_rng(seed)
     b = np.asarray(lik.bounds, dtype=np.float64)
     M = int(getattr(lik, "n_observations", 1))
@@ -187,7 +198,9 @@ def mcmc_mle(lik: Any, theta0: Any, *, n_draws: int = 1000, max_iter: int = 10,
         lx0 = float(lik.log_prob(theta)[0])
 
         def neg(t: np.ndarray, lf0: np.ndarray = lf0, lx0: float = lx0,
-                log_f: Any = log_f) -> float:
+                log_f: Any = log_f, t0: np.ndarray = theta) -> float:
+            if A is not None and (t - t0) @ A @ (t - t0) > max_step ** 2:
+                return 1e300  # outside this round's step limit
             lw = log_f(t[None])[0] - lf0
             ess = math.exp(2 * logsumexp(lw) - logsumexp(2 * lw))
             if ess < lw.size / 5:  # outside the trust region of these draws
@@ -296,7 +309,8 @@ class AdjustedPL(Target):
                              f"{theta_pl.round(4).tolist()}: no curvature to adjust")
         rng = np.random.default_rng(seed)
         if mode == "mcmc_mle":
-            res = mcmc_mle(lik, theta_pl, n_draws=n_draws, seed=int(rng.integers(2**63)))
+            res = mcmc_mle(lik, theta_pl, n_draws=n_draws, seed=int(rng.integers(2**63)),
+                           metric=H)
             theta_ml, info, sims = res.theta, np.linalg.inv(res.covariance), res.n_simulations
             self.mle = res
         else:

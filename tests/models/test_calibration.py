@@ -98,3 +98,23 @@ def test_moment_alignment_has_the_mean_and_covariance_it_promises(ising):
     wm = np.exp(lm - lm.max())
     wm /= wm.sum()
     assert np.max(np.abs(mean - exact_mean) / sd) <= np.max(np.abs(wm @ G - exact_mean) / sd)
+
+
+def test_mcmc_mle_does_not_jump_between_phases_near_the_critical_coupling():
+    """A 10 x 10 Ising data set at the critical coupling whose MPLE (0.53, -0.08) lies in the
+    ordered phase: undamped, the draws' phase flips each round and the iterate reaches the
+    box's face (singular information); with the PL-metric step limit it reaches the exact MLE."""
+    m = models.ising()
+    x = m.simulate([0.44, 0.0], shape=(10, 10), seed=6537214486005296316, n_sweeps=1000)
+    mle, _ = maximise(m.target("exact", x))
+    pl = m.target("pl", x)
+    mple, _ = maximise(pl)
+    H = -hessian(pl._log_prob, mple, _step(pl, mple))
+    seed = int(np.random.default_rng(1241352075385643944).integers(2**63))  # AdjustedPL's
+    res = mcmc_mle(m.target("likelihood", x), mple, seed=seed, metric=H)
+    assert res.converged
+    assert np.all(np.abs(res.theta - mle) < 0.3 * res.se), (res.theta, mle, res.se)
+    with pytest.raises(ValueError, match="singular"):  # the failure the limit prevents
+        mcmc_mle(m.target("likelihood", x), mple, seed=seed)
+    adj = m.target("pl_adjusted", x, seed=1241352075385643944)  # builds, on the MLE
+    assert np.all(np.abs(adj.mle.theta - mle) < 0.3 * adj.mle.se)

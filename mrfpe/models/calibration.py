@@ -28,10 +28,9 @@ posterior; it keeps the PL's *shape* beyond the first two moments (skewness and
 tails are the PL's, so near a critical coupling on a small lattice the spread of
 a skewed exact posterior is underestimated); it needs interior modes (an MPLE on
 the box's face, e.g. for a configuration of one state only, is refused) and a
-non-singular Fisher
-information (refused, naming the statistic that does not vary); and the draws
-must come from a chain that has mixed (their number, burn-in and thinning
-follow the measured autocorrelation time, :mod:`mrfpe.models.mixing`).
+non-singular Fisher information (refused, naming the statistic that does not
+vary); and the draws must come from a chain that has mixed (their number, burn-in
+and thinning follow the measured autocorrelation time, :mod:`mrfpe.models.mixing`).
 """
 
 from __future__ import annotations
@@ -405,7 +404,10 @@ def parametric_bootstrap(model: Any, data: Any, *, n_boot: int = 200, estimator:
     Fits the data, simulates ``n_boot`` data sets of the same size at the
     estimate with the model's simulator, refits each; returns a posterior-schema
     Dataset of ``kind="optima"`` (the refits; their quantiles are the bootstrap
-    intervals) with the original estimate as ``map_theta``.
+    intervals) with the original estimate as ``map_theta``. Refits on the box's face
+    (a simulated data set without information on a parameter, e.g. a uniform lattice
+    near the critical coupling) are marked in the variable ``on_face`` and named in
+    the posterior's ``bias`` attribute and diagnostics.
     """
     from mrfpe.posterior import build
 
@@ -428,8 +430,18 @@ def parametric_bootstrap(model: Any, data: Any, *, n_boot: int = 200, estimator:
         t, v = maximise(tk, grid=grid, seed=int(rng.integers(2**31)))
         fits.append(t)
         values.append(v)
-    return build(np.array(fits), np.array(values), param_names=target.param_names,
+    fits, b = np.array(fits), np.asarray(target.bounds, dtype=np.float64)
+    tol = 1e-6 * (b[:, 1] - b[:, 0])
+    on_face, bias = (fits - b[:, 0] <= tol) | (b[:, 1] - fits <= tol), None
+    if on_face.any():  # degenerate simulated data (e.g. uniform lattices): the bound is no fit
+        faces = [target.param_names[j] for j in np.flatnonzero(on_face.any(axis=0))]
+        bias = (f"{int(on_face.any(axis=1).sum())} of {n_boot} refits lie on the box's face "
+                f"({', '.join(faces)}): their data sets carry no information there, so "
+                f"intervals reaching that bound are truncated by the box, not estimated")
+    return build(fits, np.array(values), param_names=target.param_names,
                  map_theta=theta_hat[None], map_log_target=np.array([value]),
                  sampler="parametric_bootstrap", kind="optima", target=target,
-                 config={"n_boot": n_boot, "estimator": estimator}, seed=seed,
+                 config={"n_boot": n_boot, "estimator": estimator}, seed=seed, bias=bias,
+                 extra_vars={"on_face": (("sample",), on_face.any(axis=1))},
                  extra_attrs={"simulation_sweeps": draws.n_sweeps, "tau": draws.tau})
+

@@ -147,7 +147,7 @@ def grad_nodes(coef, full, iso, recT, nrecT, unaryT, obs, inv_sigma, n, a, b,
                         g2s[j] = isn * (k0 * s20 + k1 * s21 + k2 * s22 + k3 * s23)
                     # dE/de1 without the G2 rows; dE/de2 = 0 (below). Two loops on purpose: one
                     # loop with ``if not iso`` around g4s gives the same bits but LLVM does not
-                    # unswitch it, and the isotropic Jacobian is ~1.4x slower (Phong, 60x60).
+                    # unswitch it, and the isotropic Jacobian is ~1.5x slower (Phong, 60x60).
                     if iso:
                         for j in range(m):
                             q0 = (C1 * r.f01[j] + C2 * r.f02[j]) * x0[j]

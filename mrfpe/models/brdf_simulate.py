@@ -66,9 +66,10 @@ This renders each term ``B`` times per coding, i.e. about ``8 H W B``
 triangles per sweep for the pixel form: a third of the geometry that rebuilding
 the targets' tables (:func:`mrfpe.targets.energy.build_tables`, six triangles
 per node and label) for every coding would cost, and exact for both data
-terms. Measured (pixel form, B = 10, one chain, numpy on a shared 2-core host):
-about 3 ms per sweep for a 10 x 10 image, 9-15 ms for 20 x 20 and 50-60 ms for
-40 x 40.
+terms. Measured (B = 10, Ward and Phong, numpy on one core of a shared host):
+2.5-2.7 ms per sweep for a 10 x 10 image, 11-12 ms for 20 x 20 and 28-43 ms for
+40 x 40 with the pixel form; the triplet form renders twice as many triangles
+(four cliques per pixel) and takes 1.6-3 times as long.
 
 Default chain length
 --------------------
@@ -78,18 +79,22 @@ labelling) of the total energy ``U`` and of the mean label index was measured on
 ``make_scene`` scenes with 10 labels and noise 0.01, pixel form, no prior,
 ``sigma_b="auto"``, at the scene's parameters (unit-cube 0.5, 0.4, 0.3):
 
-==================  ==========  ================
-scene               tau of U    tau of mean label
-==================  ==========  ================
-Ward, smooth 20^2   2.6         6.9
-Phong, jagged 20^2  2.2         6.6
-Ward, smooth 40^2   2.2         3.2
-Phong, jagged 40^2  3.4         12.0
-==================  ==========  ================
+=========================  ========  =================
+scene (make_scene seed)    tau of U  tau of mean label
+=========================  ========  =================
+Ward, smooth, 20^2 (2)     2.6       6.9
+Phong, jagged, 20^2 (2)    2.2       6.6
+Ward, smooth, 40^2 (2)     2.2       3.2
+Phong, jagged, 40^2 (2)    3.4       12.0
+Ward, smooth, 40^2 (5)     5.6       10.5
+Phong, jagged, 40^2 (5)    2.5       5.7
+=========================  ========  =================
 
 The mean label (a drift of the whole surface along the rays) is the slow
-statistic; about 68 % of the nodes change label in each sweep. From a random
-start ``U`` reached its stationary level within about 10 sweeps. The defaults
+statistic; 56-69 % of the nodes change label in each sweep. From a random start
+``U`` reached its stationary level within about 10 sweeps on five of these
+scenes but was still above it after 60 sweeps on the Ward 40 x 40 (seed 5): start
+from the observed labelling (the default) or burn in longer. The defaults
 are ten times the largest ``tau`` of burn-in, :data:`DEFAULT_SWEEPS` = 120, and
 one ``tau`` between draws, :data:`DEFAULT_THIN` = 12 (the rule of
 :func:`mrfpe.models.calibration.simulate_draws`). Chains at other parameters,

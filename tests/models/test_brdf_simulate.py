@@ -106,6 +106,28 @@ def test_triplet_joint_and_why_the_thesis_conditionals_are_not_its_own():
         np.testing.assert_allclose(C - C[:, :1], (U - U[:, :1])[nodes], atol=1e-9)
 
 
+def _batch_z(f, th, draws, marg, mean_u):
+    """Largest |estimate - exact| / batch-means SE over the per-node marginals and mean U."""
+    stats = np.column_stack([draws, label_energy(f, th, draws)])
+    batches = stats.reshape(20, -1, stats.shape[1]).mean(axis=1)
+    se = batches.std(axis=0, ddof=1) / np.sqrt(20)
+    return float(np.max(np.abs(stats.mean(axis=0) - np.append(marg, mean_u))
+                        / np.maximum(se, 1e-3)))
+
+
+def _wrong_sweeps(f, th, n, sets, seed):
+    """Gibbs-like sweeps that update node sets sharing pixels at once (not codings)."""
+    coef = reflectance.coefficients(f.scene.model, f.scene.model.to_natural(th[None]))
+    rng = np.random.default_rng(seed)
+    x, out = f.scene.observed_labels.reshape(-1).copy(), []
+    for _ in range(n):
+        for nodes in sets:
+            logits = -conditional_energies(f, coef, x, nodes)
+            x[nodes] = np.argmax(logits + rng.gumbel(size=logits.shape), axis=0)
+        out.append(x.copy())
+    return np.array(out)
+
+
 @pytest.mark.parametrize("data_term", ["pixel", "triplet"])
 def test_gibbs_matches_brute_force(data_term):
     """2 x 2 pixels, 9 nodes, 2 labels: 512 labellings enumerated.
@@ -114,8 +136,9 @@ def test_gibbs_matches_brute_force(data_term):
     with the exact values; standard errors from 20 batch means of 100 sweeps (the
     draws are correlated; a batch spans 15 to 100 autocorrelation times), threshold
     5 SE (a batch-means t with 19 d.o.f. exceeds 5 with probability 8e-5). The
-    same bound rejects the field with the energy's sign flipped, so the test has
-    power against it.
+    same bound rejects the field with the energy's sign flipped, and sweeps over
+    node sets that share pixels (the strided sub-lattices of a 3-node-wide
+    lattice), so the test has power against both errors.
     """
     sc = make_scene("ward", theta=[0.5, 0.3, 0.2], shape=(2, 2), n_labels=2, seed=3,
                     label_step=1.0)
@@ -131,15 +154,10 @@ def test_gibbs_matches_brute_force(data_term):
         return p @ X, p @ U
 
     draws = simulate_labels(f, th, n=2000, n_sweeps=20, thin=1, seed=11).reshape(2000, 9)
-    Ud = label_energy(f, th, draws)
-    stats = np.column_stack([draws, Ud])  # (n, 10): marginals of label 1, energy
-    batches = stats.reshape(20, 100, -1).mean(axis=1)
-    se = batches.std(axis=0, ddof=1) / np.sqrt(20)
-    est = stats.mean(axis=0)
-    for sign, should_pass in ((1, True), (-1, False)):
-        marg, mean_u = exact(sign)
-        z = np.abs(est - np.append(marg, mean_u)) / np.maximum(se, 1e-3)
-        assert (z.max() < 5) == should_pass, (sign, z.round(2))
+    assert _batch_z(f, th, draws, *exact(1)) < 5
+    assert _batch_z(f, th, draws, *exact(-1)) > 5
+    wrong = _wrong_sweeps(f, th, 2000, sc.lattice.partition(4, "strided"), seed=11)
+    assert _batch_z(f, th, wrong, *exact(1)) > 5
 
 
 def test_reproducible_shapes_and_start():

@@ -20,11 +20,13 @@ from mrfpe.models.brdf_simulate import (
     DEFAULT_SWEEPS,
     DEFAULT_THIN,
     PRIORS,
-    label_energy,
+    _term_energies,
     label_field,
     simulate_labels,
 )
+from mrfpe.models.brdf_simulate import _as_labellings as _labellings
 from mrfpe.models.options import PL_ADJUSTED_OPTIONS
+from mrfpe.targets import reflectance
 from mrfpe.targets.base import Target, as_theta_batch
 from mrfpe.targets.brdf_target import COMMON_OPTIONS
 from mrfpe.targets.options import Option, choice_check, number_check
@@ -81,9 +83,16 @@ class BRDFLikelihood(Target):
         ``-inf`` outside the unit cube."""
         theta = as_theta_batch(theta, self.ndim)
         x = self.x if x is None else np.asarray(x).reshape(-1, self.field.n_nodes)
+        x = _labellings(self.field, x, "x")[0]  # checked (M, n_nodes) label indices
         out = np.full(theta.shape[0], -np.inf)
-        for j in np.flatnonzero(self.in_bounds(theta)):
-            out[j] = -float(np.sum(label_energy(self.field, theta[j], x)))
+        inside = self.in_bounds(theta)
+        if inside.any():  # the labellings' geometry once, every parameter vector's radiance
+            model = self.scene.model
+            coef = reflectance.coefficients(model, model.to_natural(theta[inside]))
+            ok = np.all(np.isfinite(coef), axis=1)
+            data = _term_energies(self.field, np.where(ok[:, None], coef, 0.0), x)
+            unary = self.field.unary[np.arange(self.field.n_nodes)[None, :], x].sum()
+            out[inside] = np.where(ok, -(data.sum(axis=(1, 2)) + unary), -np.inf)
         return out
 
     def _row_bytes(self) -> float:

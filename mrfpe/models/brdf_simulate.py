@@ -269,10 +269,11 @@ def _coefficients(field: LabelField, theta: Any) -> np.ndarray:
 
 
 def _term_energies(field: LabelField, coef: np.ndarray, labels: np.ndarray) -> np.ndarray:
-    """Data terms ``D_t`` (M, n_terms) of labellings (M, n_nodes): each term rendered once."""
+    """Data terms ``D_t`` (N, M, n_terms) of labellings (M, n_nodes) at coefficients (N, 5):
+    each term's geometry computed once per labelling, its radiance once per coefficient row."""
     sc, tri, M = field.scene, field.tri, labels.shape[0]
     n_tri = tri.shape[0]
-    out = np.empty((M, n_tri // field.per_term))
+    out = np.empty((coef.shape[0], M, n_tri // field.per_term))
     step = max(1, _BATCH_TRIANGLES // n_tri)
     for a in range(0, M, step):
         lab = labels[a:a + step]
@@ -282,8 +283,9 @@ def _term_energies(field: LabelField, coef: np.ndarray, labels: np.ndarray) -> n
         feats, weight = shading_features(sc.model, geom)
         k = feats.shape[0]
         sep = reflectance.features(sc.model, feats.reshape(k, -1), weight.reshape(-1))
-        rad = reflectance.radiance(coef, sep)[0].reshape(lab.shape[0], -1, field.per_term)
-        out[a:a + step] = np.abs(field.y - field.w * rad.sum(axis=2)) / field.sigma_b
+        rad = reflectance.radiance(coef, sep).reshape(coef.shape[0], lab.shape[0], -1,
+                                                      field.per_term)
+        out[:, a:a + step] = np.abs(field.y - field.w * rad.sum(axis=3)) / field.sigma_b
     return out
 
 
@@ -336,7 +338,7 @@ def label_energy(scene: Any, theta: Any, labels: Any, **options: Any) -> np.ndar
     coef = _coefficients(field, theta)
     check_memory(8.0 * x.shape[0] * (field.tri.shape[0] + field.n_nodes),
                  f"label_energy of {x.shape[0]} labellings", "pass fewer at a time")
-    data = _term_energies(field, coef, x).sum(axis=1)
+    data = _term_energies(field, coef, x)[0].sum(axis=1)
     u = field.unary[np.arange(field.n_nodes)[None, :], x].sum(axis=1)
     out = data + u
     return float(out[0]) if single else out
@@ -352,7 +354,7 @@ def conditional_energies(field: LabelField, coef: np.ndarray, x: np.ndarray,
     B = field.n_labels
     X = np.repeat(x[None, :], B, axis=0)
     X[:, nodes] = np.arange(B)[:, None]
-    D = _term_energies(field, coef, X)  # (B, n_terms)
+    D = _term_energies(field, coef, X)[0]  # (B, n_terms)
     E = np.asarray(field.incidence[nodes] @ D.T).T  # (B, len(nodes))
     return E + field.unary[nodes].T
 

@@ -82,8 +82,7 @@ class BRDFLikelihood(Target):
         """``-sum_k U(x_k; theta_j)`` (N,) for labellings ``x`` (default the observed one);
         ``-inf`` outside the unit cube."""
         theta = as_theta_batch(theta, self.ndim)
-        x = self.x if x is None else np.asarray(x).reshape(-1, self.field.n_nodes)
-        x = _labellings(self.field, x, "x")[0]  # checked (M, n_nodes) label indices
+        x = _labellings(self.field, self.x if x is None else x, "x")[0]  # (M, n_nodes)
         out = np.full(theta.shape[0], -np.inf)
         inside = self.in_bounds(theta)
         if inside.any():  # the labellings' geometry once, every parameter vector's radiance
@@ -128,8 +127,12 @@ class BRDFModel(Model):
     """The BRDF MRF of the thesis, whose data are a Scene (depth labels and an image).
 
     Estimators: ``pl`` (4.23-4.24, 5.64-5.66), ``pl2`` (6.54-6.59), ``pl3``
-    (6.60-6.62), ``pls`` (7.5-7.7), ``fit`` and ``pml`` (beyond the thesis) and
-    ``coding``: the PL summed over one of the node lattice's four codings.
+    (6.60-6.62), ``pls`` (7.5-7.7), ``fit`` and ``pml`` (beyond the thesis),
+    ``coding``: the PL summed over one of the node lattice's four codings, and,
+    from the label simulator (:meth:`simulate`), ``likelihood``
+    (:class:`BRDFLikelihood`, for the exchange sampler) and ``pl_adjusted`` (the
+    ``pl``, ``pls`` or ``pl3`` of the simulated joint, per ``prior``, calibrated by
+    :class:`mrfpe.models.calibration.AdjustedPL`).
     """
 
     name = "brdf"

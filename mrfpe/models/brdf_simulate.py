@@ -44,7 +44,7 @@ every term that contains node ``i`` enters with weight 1.
   joint ``U = sum_c D_c`` over all ``4HW`` cliques, whose exact full conditional
   at node ``i`` sums the (up to 12) cliques containing ``i``: every clique of
   every pixel touching ``i`` except the one centred on that pixel's opposite
-  corner. The triplet ``pl`` is then a pseudolikelihood of a different field.
+  corner. The triplet ``pl`` is then not the pseudolikelihood of this (or any) field.
 * ``pl2`` (6.57-6.59) is not offered: its smoothness term is a pairwise clique
   whose value is measured in each node's own label spacing, so it is symmetric
   (and the conditionals consistent) only when neighbouring nodes share a spacing.

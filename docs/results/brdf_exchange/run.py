@@ -93,6 +93,8 @@ def report(name: str, post, seconds: float, extra: str = "") -> None:
     print(f"{name}: {seconds:.1f} s; mean {em.round(3)} sd {es.round(3)} "
           f"z {((em - mean) / sd).round(2)} ratio {(es / sd).round(2)} "
           f"reliable {post.attrs.get('diag_reliable')} {extra}", flush=True)
+    if not post.attrs.get("diag_reliable"):
+        print("   ", str(post.attrs.get("diag_messages", "")).replace("\n", "; "), flush=True)
 
 
 which = sys.argv[7].split(",")

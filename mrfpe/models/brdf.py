@@ -20,7 +20,7 @@ from mrfpe.models.brdf_simulate import (
     DEFAULT_SWEEPS,
     DEFAULT_THIN,
     PRIORS,
-    _term_energies,
+    _energies,
     label_field,
     simulate_labels,
 )
@@ -89,9 +89,8 @@ class BRDFLikelihood(Target):
             model = self.scene.model
             coef = reflectance.coefficients(model, model.to_natural(theta[inside]))
             ok = np.all(np.isfinite(coef), axis=1)
-            data = _term_energies(self.field, np.where(ok[:, None], coef, 0.0), x)
-            unary = self.field.unary[np.arange(self.field.n_nodes)[None, :], x].sum()
-            out[inside] = np.where(ok, -(data.sum(axis=(1, 2)) + unary), -np.inf)
+            u = _energies(self.field, np.where(ok[:, None], coef, 0.0), x).sum(axis=1)
+            out[inside] = np.where(ok, -u, -np.inf)
         return out
 
     def _row_bytes(self) -> float:
@@ -202,8 +201,6 @@ class BRDFModel(Model):
         -------
         (n, H+1, W+1) int64 label indices.
         """
-        from mrfpe.models.brdf_simulate import DEFAULT_SWEEPS, DEFAULT_THIN, simulate_labels
-
         if scene is None:
             raise ValueError("scene must be given: the BRDF MRF draws the labels of a scene "
                              "(its image, camera, light and label sets)")

@@ -115,11 +115,10 @@ from mrfpe.shading import shading_features, triangle_geometry
 from mrfpe.targets import reflectance
 from mrfpe.targets.brdf_target import auto_sigma_b
 from mrfpe.targets.energy import DATA_TERMS
-from mrfpe.validation import check_choice, check_positive_int, check_range, check_seed
+from mrfpe.validation import check_bool, check_choice, check_positive_int, check_range, check_seed
 
 __all__ = ["DEFAULT_SWEEPS", "DEFAULT_THIN", "PRIORS", "LabelField", "conditional_energies",
-           "label_energy",
-           "label_field", "simulate_labels"]
+           "label_energy", "label_field", "simulate_labels"]
 
 #: Unary energies the joint can carry (module docstring).
 PRIORS = ("none", "range", "beliefs")
@@ -189,8 +188,7 @@ def _unary(scene: Any, prior: str, prior_weight: float, temperature: float) -> n
         return np.zeros((n, B))
     if prior == "range":
         if scene.range_prior is None:
-            raise ValueError("prior='range' needs the scene's range_prior (7.4); this scene "
-                             "has none")
+            raise ValueError("prior='range' needs the scene's range_prior (7.4); it has none")
         return prior_weight * np.asarray(scene.range_prior, dtype=np.float64).reshape(n, B)
     if scene.beliefs is None:
         raise ValueError("prior='beliefs' needs the scene's beliefs (6.60); this scene has none")
@@ -310,6 +308,19 @@ def _as_labellings(field: LabelField, labels: Any, name: str) -> tuple[np.ndarra
     return arr, single
 
 
+def _field(scene: Any, options: dict[str, Any]) -> LabelField:
+    """``scene`` if it is a LabelField (then no options), else its :func:`label_field`."""
+    if isinstance(scene, LabelField) and options:
+        raise ValueError(f"options {sorted(options)} cannot be given with a LabelField")
+    return scene if isinstance(scene, LabelField) else label_field(scene, **options)
+
+
+def _energies(field: LabelField, coef: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``U`` (N, M) of labellings ``x`` (M, n_nodes) at coefficient rows ``coef`` (N, 5)."""
+    data = _term_energies(field, coef, x).sum(axis=2)
+    return data + field.unary[np.arange(field.n_nodes)[None, :], x].sum(axis=1)
+
+
 def label_energy(scene: Any, theta: Any, labels: Any, **options: Any) -> np.ndarray | float:
     """``U(x; theta)``, the energy of whole labellings (4.3, 4.12/4.20; module docstring).
 
@@ -331,16 +342,12 @@ def label_energy(scene: Any, theta: Any, labels: Any, **options: Any) -> np.ndar
     -------
     float for one labelling, (M,) for a batch; ``inf`` where a label is forbidden.
     """
-    field = scene if isinstance(scene, LabelField) else label_field(scene, **options)
-    if options and isinstance(scene, LabelField):
-        raise ValueError(f"options {sorted(options)} cannot be given with a LabelField")
+    field = _field(scene, options)
     x, single = _as_labellings(field, labels, "labels")
     coef = _coefficients(field, theta)
     check_memory(8.0 * x.shape[0] * (field.tri.shape[0] + field.n_nodes),
                  f"label_energy of {x.shape[0]} labellings", "pass fewer at a time")
-    data = _term_energies(field, coef, x)[0].sum(axis=1)
-    u = field.unary[np.arange(field.n_nodes)[None, :], x].sum(axis=1)
-    out = data + u
+    out = _energies(field, coef, x)[0]
     return float(out[0]) if single else out
 
 
@@ -411,14 +418,11 @@ def simulate_labels(scene: Any, theta: Any, n: int = 1, *, n_sweeps: int = DEFAU
     (n, H+1, W+1) int64
         Label indices, shaped as ``scene.observed_labels``.
     """
-    field = scene if isinstance(scene, LabelField) else label_field(scene, **options)
-    if options and isinstance(scene, LabelField):
-        raise ValueError(f"options {sorted(options)} cannot be given with a LabelField")
+    field = _field(scene, options)
     n = check_positive_int("n", n)
     n_sweeps = check_positive_int("n_sweeps", n_sweeps, minimum=0)
     thin = check_positive_int("thin", thin)
-    if not isinstance(progress, bool):
-        raise ValueError(f"progress must be True or False; got {progress!r}")
+    check_bool("progress", progress)
     rng = np.random.default_rng(check_seed(seed))
     coef = _coefficients(field, theta)
     B, n_nodes = field.n_labels, field.n_nodes
@@ -433,6 +437,7 @@ def simulate_labels(scene: Any, theta: Any, n: int = 1, *, n_sweeps: int = DEFAU
     if n_sweeps == 0:
         out[0] = x
     from tqdm.auto import tqdm
+
 
     for s in tqdm(range(1, total + 1), disable=not progress, leave=False,
                   desc="label sweeps", unit="sweep"):

@@ -47,7 +47,7 @@ code = combos @ powers
 swapped = np.concatenate([combos[:, K:], combos[:, :K]], axis=1) @ powers
 swap = np.argsort(code)[swapped]  # labelling holding the swapped combo
 
-def log_z_and_obs(theta):
+def log_z(theta):
     coef = reflectance.coefficients(sc.model, sc.model.to_natural(theta))
     D = _term_energies(f, coef, lab).reshape(theta.shape[0], len(combos), H, W).sum(axis=2)
     N, S = theta.shape[0], B ** K
@@ -61,7 +61,7 @@ if len(sys.argv) > 6 and sys.argv[6] == "check":  # brute force on a tiny lattic
     from mrfpe.models.brdf_simulate import label_energy
     X = np.array(list(itertools.product(range(B), repeat=K * nc)))
     th = np.array([[0.3, 0.6, 0.4], [0.7, 0.2, 0.5]])
-    print([float(logsumexp(-label_energy(f, t, X))) for t in th], log_z_and_obs(th))
+    print([float(logsumexp(-label_energy(f, t, X))) for t in th], log_z(th))
     sys.exit()
 
 m = get("brdf")
@@ -69,7 +69,7 @@ lik = m.target("likelihood", sc, sigma_b=sigma, data_term="pixel")
 g = (np.arange(G) + 0.5) / G
 grid = np.array(list(itertools.product(g, g, g)))
 t0 = time.time()
-lz = np.concatenate([log_z_and_obs(grid[i:i + 200]) for i in range(0, len(grid), 200)])
+lz = np.concatenate([log_z(grid[i:i + 200]) for i in range(0, len(grid), 200)])
 lp = lik.unnormalised(grid) - lz
 pl = m.target("pl", sc, sigma_b=sigma, data_term="pixel")
 lpl = pl.log_prob(grid)

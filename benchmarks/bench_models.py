@@ -18,6 +18,10 @@ alike.
 * ``swendsen_wang``: Swendsen-Wang and Gibbs sweeps per second (one thread), Potts
   512² at the critical coupling ``log(1 + sqrt(q))``.
 
+* ``label_sweeps``: Gibbs sweeps of the BRDF label field
+  (:func:`mrfpe.models.brdf_simulate.simulate_labels`) with the radiance memo
+  against rendering every triangle, after a warm-up that fills the memo
+  (:func:`label_sweeps`);
 * ``posteriors``: the cost of a posterior over θ by raw exp(PL), the calibrated
   pseudolikelihood and the exchange algorithm (:func:`posterior_costs`);
 * ``pl``: pseudolikelihood evaluation against a float64 GEMM of the same shape,
@@ -303,12 +307,64 @@ def posterior_costs(quick: bool = False) -> list[str]:
     return rows
 
 
+def _label_sweeps(field, u, x, sweeps: int, memo: bool) -> np.ndarray:
+    """``sweeps`` label sweeps from ``x``, with the radiance memo or rendering every triangle."""
+    from mrfpe.models import label_render
+    from mrfpe.models.brdf_simulate import simulate_labels
+
+    old = label_render.MEMO_BUDGET_FRACTION
+    label_render.MEMO_BUDGET_FRACTION = old if memo else 0.0
+    try:
+        return simulate_labels(field, u, 1, n_sweeps=sweeps, seed=1, init=x)[0]
+    finally:
+        label_render.MEMO_BUDGET_FRACTION = old
+
+
+def label_sweeps(quick: bool = False) -> list[str]:
+    """Seconds per BRDF label sweep with the radiance memo and without, alternated.
+
+    Each side continues its own chain (Ward, pixel form, range prior, the scene's
+    parameters x 0.9) from the observed labels; the memoised side first runs
+    ``warm`` sweeps. Both chains are the same chain (the memo's radiances are the
+    render's), so the two sides do the same work but for the look-ups.
+    """
+    from mrfpe.models.brdf_simulate import label_field, simulate_labels
+    from mrfpe.synthetic import make_scene
+
+    cases = [((10, 10), 5)] if quick else [((20, 20), 10), ((40, 40), 10), ((100, 100), 20)]
+    warm, sweeps, repeat = (5, 2, 2) if quick else (40, 5, 3)
+    rows = ["\n### BRDF label sweeps: radiance memo against rendering every triangle\n",
+            f"Ward, pixel form, range prior; {warm} warm-up sweeps, then the median of "
+            f"{repeat} alternated runs of {sweeps} sweeps per side.\n",
+            "| image | labels | render (s/sweep) | memo (s/sweep) | render ÷ memo |",
+            "|---|---|---|---|---|"]
+    for shape, B in cases:
+        sc = make_scene("ward", theta=[0.5, 0.3, 0.2], shape=shape, n_labels=B, seed=2,
+                        noise=0.01)
+        u = sc.model.to_unit(sc.true_theta[None])[0] * 0.9
+        fields = {"memo": label_field(sc, prior="range"), "render": label_field(sc, prior="range")}
+        state = {k: simulate_labels(fields[k], u, 1, n_sweeps=warm if k == "memo" else 0,
+                                    seed=0)[0] for k in fields}
+
+        def side(k: str, fields=fields, state=state, u=u) -> Callable[[], object]:
+            def go() -> None:
+                state[k] = _label_sweeps(fields[k], u, state[k], sweeps, memo=k == "memo")
+            return go
+
+        render, memo = _median_alternated([side("render"), side("memo")], repeat)
+        rows.append(f"| {shape[0]}×{shape[1]} | {B} | {render / sweeps:.4f} | "
+                    f"{memo / sweeps:.4f} | {render / memo:.1f} |")
+        print(rows[-1], flush=True)
+    return rows
+
+
 #: The suite's measurements, in order: name -> ``(quick) -> markdown lines``.
 MEASUREMENTS: dict[str, Callable[[bool], list[str]]] = {
     "gibbs": gibbs_vs_numpy,
     "growth": growth,
     "swendsen_wang": swendsen_wang_rates,
     "pl": pl_rows,
+    "label_sweeps": label_sweeps,
     "posteriors": posterior_costs,
 }
 

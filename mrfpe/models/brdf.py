@@ -11,10 +11,12 @@ node lattice's four codings (:meth:`mrfpe.lattice.Lattice.codings`).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any, ClassVar
 
 import numpy as np
 
+from mrfpe.budget import check_memory
 from mrfpe.models.base import Model
 from mrfpe.models.brdf_simulate import (
     DEFAULT_SWEEPS,
@@ -25,6 +27,7 @@ from mrfpe.models.brdf_simulate import (
     simulate_labels,
 )
 from mrfpe.models.brdf_simulate import _as_labellings as _labellings
+from mrfpe.models.label_render import data_terms, draw_features
 from mrfpe.models.options import PL_ADJUSTED_OPTIONS
 from mrfpe.targets import reflectance
 from mrfpe.targets.base import Target, as_theta_batch
@@ -92,6 +95,33 @@ class BRDFLikelihood(Target):
             u = _energies(self.field, np.where(ok[:, None], coef, 0.0), x).sum(axis=1)
             out[inside] = np.where(ok, -u, -np.inf)
         return out
+
+    def log_f_of_draws(self, y: Any) -> Callable[[Any], np.ndarray]:
+        """``theta (N, d) -> -U(y_k; theta_j)`` (N, K) for labellings ``y`` reused at many theta.
+
+        Each labelling's theta-independent render is kept
+        (:func:`~mrfpe.models.label_render.draw_features`, ``40 n_triangles`` bytes per
+        labelling), so a parameter vector costs one exponential per triangle and
+        labelling (the Monte Carlo MLE's hook, :mod:`mrfpe.models.calibration`).
+        """
+        x = _labellings(self.field, y, "y")[0]
+        check_memory(40.0 * x.shape[0] * self.field.tri.shape[0],
+                     f"the renders of {x.shape[0]} labellings", "pass fewer draws")
+        feats = draw_features(self.field, x).reshape(-1, 5)
+        unary = self.field.unary[np.arange(self.field.n_nodes)[None, :], x].sum(axis=1)
+        model, K = self.scene.model, x.shape[0]
+
+        def log_f(theta: Any) -> np.ndarray:
+            theta = as_theta_batch(theta, self.ndim)
+            out = np.full((theta.shape[0], K), -np.inf)
+            for j in np.flatnonzero(self.in_bounds(theta)):
+                coef = reflectance.coefficients(model, model.to_natural(theta[j:j + 1]))
+                if np.all(np.isfinite(coef)):
+                    rad = reflectance.radiance(coef, feats).reshape(1, K, -1)
+                    out[j] = -(data_terms(self.field, rad)[0].sum(axis=1) + unary)
+            return out
+
+        return log_f
 
     def _row_bytes(self) -> float:
         return 8.0 * 4 * (self.field.tri.shape[0] + self.field.n_nodes)

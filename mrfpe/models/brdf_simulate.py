@@ -62,14 +62,16 @@ that do not touch ``i`` do not depend on ``s`` and cancel in the normalisation. 
 label is drawn per node with the Gumbel-max trick from ``-E_i``; every random
 number comes from one ``numpy.random.Generator`` seeded by ``seed``.
 
-This renders each term ``B`` times per coding, i.e. about ``8 H W B``
-triangles per sweep for the pixel form: a third of the geometry that rebuilding
-the targets' tables (:func:`mrfpe.targets.energy.build_tables`, six triangles
-per node and label) for every coding would cost, and exact for both data
-terms. Measured (B = 10, Ward and Phong, numpy on one core of a shared host):
-2.5-2.7 ms per sweep for a 10 x 10 image, 11-12 ms for 20 x 20 and 28-43 ms for
-40 x 40 with the pixel form; the triplet form renders twice as many triangles
-(four cliques per pixel) and takes 1.6-3 times as long.
+This needs each term ``B`` times per coding, i.e. about ``8 H W B`` triangle
+radiances per sweep for the pixel form. A chain at one ``theta`` meets the same
+(triangle, vertex labels) over and over, so radiances are memoised
+(:class:`mrfpe.models.label_render.RadianceMemo`, the same numbers as rendering
+them afresh) and after the first sweeps a sweep is mostly look-ups. Measured on
+one core of a shared host (Ward, pixel form): with B = 10, 2.5-2.7 ms per sweep
+for a 10 x 10 image, 11-12 ms for 20 x 20 and 28-43 ms for 40 x 40 rendering
+every triangle; a 100 x 100 image with B = 20 took 0.47 s per sweep rendering
+every triangle and 0.07-0.13 s with the memo after 40-80 sweeps. The triplet
+form renders twice as many triangles (four cliques per pixel).
 
 Default chain length
 --------------------
@@ -105,13 +107,14 @@ priors or scene sizes may mix more slowly;
 from __future__ import annotations
 
 from dataclasses import dataclass
+from dataclasses import field as _slot
 from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
 
 from mrfpe.budget import check_memory
-from mrfpe.shading import shading_features, triangle_geometry
+from mrfpe.models.label_render import BATCH_TRIANGLES, data_terms, memo_for, term_energies
 from mrfpe.targets import reflectance
 from mrfpe.targets.brdf_target import auto_sigma_b
 from mrfpe.targets.energy import DATA_TERMS
@@ -125,8 +128,6 @@ PRIORS = ("none", "range", "beliefs")
 #: Default burn-in sweeps and sweeps between draws (measured, module docstring).
 DEFAULT_SWEEPS = 120
 DEFAULT_THIN = 12
-#: Triangles rendered per numpy batch (bounds the working memory, ~1 kB per triangle).
-_BATCH_TRIANGLES = 65536
 
 
 @dataclass(frozen=True, eq=False)
@@ -155,6 +156,8 @@ class LabelField:
         Each term's intensity and the weight of its triangles' radiance sum.
     incidence : scipy.sparse.csr_matrix (n_nodes, n_terms)
         1 where the term depends on the node's label.
+    memo : dict
+        Working memory of the simulator (:class:`mrfpe.models.label_render.RadianceMemo`).
     """
 
     scene: Any
@@ -168,6 +171,7 @@ class LabelField:
     y: np.ndarray
     w: np.ndarray
     incidence: Any
+    memo: dict = _slot(default_factory=dict, repr=False)
 
     @property
     def n_nodes(self) -> int:
@@ -266,27 +270,6 @@ def _coefficients(field: LabelField, theta: Any) -> np.ndarray:
     return coef
 
 
-def _term_energies(field: LabelField, coef: np.ndarray, labels: np.ndarray) -> np.ndarray:
-    """Data terms ``D_t`` (N, M, n_terms) of labellings (M, n_nodes) at coefficients (N, 5):
-    each term's geometry computed once per labelling, its radiance once per coefficient row."""
-    sc, tri, M = field.scene, field.tri, labels.shape[0]
-    n_tri = tri.shape[0]
-    out = np.empty((coef.shape[0], M, n_tri // field.per_term))
-    step = max(1, _BATCH_TRIANGLES // n_tri)
-    for a in range(0, M, step):
-        lab = labels[a:a + step]
-        pts = field.points[tri[None], lab[:, tri]]  # (m, n_tri, 3 vertices, 3)
-        geom = triangle_geometry(pts[..., 0, :], pts[..., 1, :], pts[..., 2, :], sc.camera,
-                                 sc.light, sc.tangent_ref)
-        feats, weight = shading_features(sc.model, geom)
-        k = feats.shape[0]
-        sep = reflectance.features(sc.model, feats.reshape(k, -1), weight.reshape(-1))
-        rad = reflectance.radiance(coef, sep).reshape(coef.shape[0], lab.shape[0], -1,
-                                                      field.per_term)
-        out[:, a:a + step] = np.abs(field.y - field.w * rad.sum(axis=3)) / field.sigma_b
-    return out
-
-
 def _as_labellings(field: LabelField, labels: Any, name: str) -> tuple[np.ndarray, bool]:
     """Labellings as (M, n_nodes) int64 and whether a single one was given."""
     arr = np.asarray(labels)
@@ -317,7 +300,10 @@ def _field(scene: Any, options: dict[str, Any]) -> LabelField:
 
 def _energies(field: LabelField, coef: np.ndarray, x: np.ndarray) -> np.ndarray:
     """``U`` (N, M) of labellings ``x`` (M, n_nodes) at coefficient rows ``coef`` (N, 5)."""
-    data = _term_energies(field, coef, x).sum(axis=2)
+    memo = field.memo.get("radiance")
+    if memo is None or coef.shape[0] != 1 or not np.array_equal(memo.coef, coef):
+        memo = None
+    data = term_energies(field, coef, x, memo).sum(axis=2)
     return data + field.unary[np.arange(field.n_nodes)[None, :], x].sum(axis=1)
 
 
@@ -352,16 +338,20 @@ def label_energy(scene: Any, theta: Any, labels: Any, **options: Any) -> np.ndar
 
 
 def conditional_energies(field: LabelField, coef: np.ndarray, x: np.ndarray,
-                         nodes: np.ndarray) -> np.ndarray:
+                         nodes: np.ndarray, memo: Any = None) -> np.ndarray:
     """``E_i(s)`` (B, len(nodes)) of nodes no two of which share a term, given ``x``.
 
     Up to a per-node constant (the terms not touching ``i``): each label ``s`` sets
-    every node of ``nodes`` to ``s`` at once and renders every term once.
+    every node of ``nodes`` to ``s`` at once and renders every term once (radiances
+    from ``memo``, a :class:`~mrfpe.models.label_render.RadianceMemo` at ``coef``, if given).
     """
     B = field.n_labels
-    X = np.repeat(x[None, :], B, axis=0)
-    X[:, nodes] = np.arange(B)[:, None]
-    D = _term_energies(field, coef, X)[0]  # (B, n_terms)
+    if memo is not None:
+        D = data_terms(field, memo.coding_radiance(field, x, nodes)[None])[0]  # (B, n_terms)
+    else:
+        X = np.repeat(x[None, :], B, axis=0)
+        X[:, nodes] = np.arange(B)[:, None]
+        D = term_energies(field, coef, X)[0]
     E = np.asarray(field.incidence[nodes] @ D.T).T  # (B, len(nodes))
     return E + field.unary[nodes].T
 
@@ -427,10 +417,11 @@ def simulate_labels(scene: Any, theta: Any, n: int = 1, *, n_sweeps: int = DEFAU
     coef = _coefficients(field, theta)
     B, n_nodes = field.n_labels, field.n_nodes
     check_memory(8.0 * (n * n_nodes + 3 * B * (n_nodes + field.tri.shape[0]))
-                 + 1024.0 * _BATCH_TRIANGLES,
+                 + 1024.0 * BATCH_TRIANGLES,
                  f"simulating {n} labellings of a {field.scene.shape[0]}x"
                  f"{field.scene.shape[1]} scene with {B} labels", "draw fewer at a time")
     x = _start(field, init, rng)
+    memo = memo_for(field, coef)
     codings = field.scene.lattice.codings()
     out = np.empty((n, n_nodes), dtype=np.int64)
     total = n_sweeps + thin * (n - 1)
@@ -442,7 +433,7 @@ def simulate_labels(scene: Any, theta: Any, n: int = 1, *, n_sweeps: int = DEFAU
     for s in tqdm(range(1, total + 1), disable=not progress, leave=False,
                   desc="label sweeps", unit="sweep"):
         for nodes in codings:
-            logits = -conditional_energies(field, coef, x, nodes)
+            logits = -conditional_energies(field, coef, x, nodes, memo)
             # Gumbel-max: argmax(logit + Gumbel) is a draw from softmax(logit)
             x[nodes] = np.argmax(logits + rng.gumbel(size=logits.shape), axis=0)
         if s >= n_sweeps and (s - n_sweeps) % thin == 0:

@@ -20,8 +20,8 @@ curvature is not the likelihood's. With a simulator both can be corrected:
   information. ``align="moments"`` (the default) maps the PL posterior's mean and
   covariance onto the likelihood posterior's third-order mean ``θ_ML + δ`` and
   ``I⁻¹`` instead, so that the PL's skew does not move the mean.
-* :func:`parametric_bootstrap` -- the sampling distribution of the MPLE by
-  simulating data at the MPLE and refitting (as R's ngspatial does).
+* :func:`mrfpe.models.bootstrap.parametric_bootstrap` -- the sampling distribution
+  of the MPLE by simulating data at the MPLE and refitting (as R's ngspatial does).
 
 Assumptions, and when it fails: the adjustment is exact for a Gaussian
 posterior; it keeps the PL's *shape* beyond the first two moments (skewness and
@@ -36,7 +36,7 @@ and thinning follow the measured autocorrelation time, :mod:`mrfpe.models.mixing
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -48,7 +48,7 @@ from mrfpe.targets.base import Target, as_theta_batch
 from mrfpe.targets.maximise import maximise
 
 __all__ = ["AdjustedPL", "Draws", "fisher_information", "hessian", "mcmc_mle",
-           "parametric_bootstrap", "simulate_draws"]
+           "simulate_draws"]
 
 
 @dataclass(frozen=True)
@@ -60,25 +60,28 @@ class Draws:
     tau: float
     burn_in: int
     thin: int
+    memo: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def n_sweeps(self) -> int:
         return int(self.burn_in + self.thin * (self.y.shape[0] - 1))
 
 
-def simulate_draws(lik: Any, theta: Any, n_draws: int, *, seed: int) -> Draws:
+def simulate_draws(lik: Any, theta: Any, n_draws: int, *, seed: int,
+                   pilot_sweeps: int = 2000) -> Draws:
     """``n_draws`` configurations at ``theta`` from one chain started at the data.
 
     Exact simulators give independent draws; otherwise the chain's autocorrelation
-    time ``τ`` is measured first, then the chain runs ``max(10 τ, 10)`` sweeps of
-    burn-in and keeps a draw every ``max(1, ⌈τ⌉)`` sweeps.
+    time ``τ`` is measured first (a pilot chain of at least ``pilot_sweeps`` and 50 τ
+    sweeps, :func:`~mrfpe.models.mixing.autocorrelation_time`), then the chain runs
+    ``max(10 τ, 10)`` sweeps of burn-in and keeps a draw every ``max(1, ⌈τ⌉)`` sweeps.
     """
     th = as_theta_batch(theta, lik.ndim)[0]
     rng = np.random.default_rng(seed)
     if getattr(lik, "exact_simulator", False):
         y = lik.simulate(th, n=n_draws, seed=int(rng.integers(2**63)))
         return Draws(th, np.asarray(y), 0.0, 0, 1)
-    tau = autocorrelation_time(lik, th, seed=int(rng.integers(2**63)))
+    tau = autocorrelation_time(lik, th, seed=int(rng.integers(2**63)), min_sweeps=pilot_sweeps)
     if not math.isfinite(tau):
         raise ValueError(f"the model's simulator does not mix at theta {th.tolist()}: its "
                          f"autocorrelation time exceeds the pilot run (use a simulator that "
@@ -89,12 +92,23 @@ def simulate_draws(lik: Any, theta: Any, n_draws: int, *, seed: int) -> Draws:
     return Draws(th, np.asarray(y), tau, burn, thin)
 
 
-def _log_f_of(lik: Any, y: np.ndarray) -> Any:
-    """``theta (N, d) -> log f(y_k | θ_j)`` (N, K) for draws ``y`` of one configuration each.
+def _log_f_of(lik: Any, draws: Draws) -> Any:
+    """``theta (N, d) -> log f(y_k | θ_j)`` (N, K) for the draws (one configuration each),
+    made once per draws.
 
     For a design model the draws' sufficient statistics are computed once, so each
-    call is one matrix product.
+    call is one matrix product; a target with a ``log_f_of_draws(y)`` method (e.g.
+    the BRDF likelihood, which keeps each draw's geometry) supplies its own.
     """
+    if "log_f" not in draws.memo:
+        draws.memo["log_f"] = _make_log_f(lik, draws.y)
+    return draws.memo["log_f"]
+
+
+def _make_log_f(lik: Any, y: np.ndarray) -> Any:
+    own = getattr(lik, "log_f_of_draws", None)
+    if callable(own):
+        return own(y)
     stats = getattr(lik, "sufficient_statistics", None)
     design = getattr(lik, "design", None)
     if callable(stats) and design is not None:
@@ -103,11 +117,13 @@ def _log_f_of(lik: Any, y: np.ndarray) -> Any:
     return lambda theta: np.stack([lik.unnormalised(theta, yk[None]) for yk in y], axis=1)
 
 
-def _scores(lik: Any, theta: np.ndarray, y: np.ndarray, h: np.ndarray) -> np.ndarray:
-    """``∇_θ log f(y_k | θ)`` (K, d) by central differences (exact for log-linear models)."""
+def _scores(lik: Any, draws: Draws, h: np.ndarray) -> np.ndarray:
+    """``∇_θ log f(y_k | θ)`` (K, d) at the draws' θ by central differences (exact for
+    log-linear models)."""
+    theta = draws.theta
     d = theta.size
     steps = np.concatenate([theta + np.diag(h), theta - np.diag(h)])
-    lf = _log_f_of(lik, y)(steps)  # (2d, K)
+    lf = _log_f_of(lik, draws)(steps)  # (2d, K)
     return ((lf[:d] - lf[d:]) / (2 * h)[:, None]).T
 
 
@@ -131,7 +147,7 @@ def fisher_information(lik: Any, draws: Draws) -> np.ndarray:
     information: every draw at this θ has the same statistic -- e.g. uniform lattices
     on the coupling's bound -- or the data cannot identify the parameter).
     """
-    s = _scores(lik, draws.theta, draws.y, _step(lik, draws.theta))
+    s = _scores(lik, draws, _step(lik, draws.theta))
     cov = np.atleast_2d(np.cov(s, rowvar=False))
     M = int(getattr(lik, "n_observations", 1))
     info = M * cov
@@ -168,11 +184,13 @@ class MLEResult:
 
 def mcmc_mle(lik: Any, theta0: Any, *, n_draws: int = 1000, max_iter: int = 10,
              tol: float = 0.05, seed: int = 0, metric: np.ndarray | None = None,
-             max_step: float = 1.0) -> MLEResult:
+             max_step: float = 1.0, pilot_sweeps: int = 2000) -> MLEResult:
     """Geyer-Thompson Monte Carlo MLE from ``theta0``, iterated (see the module docstring).
 
     Stops when a step moves less than ``tol`` asymptotic standard errors in every
-    coordinate (``converged``) or after ``max_iter`` rounds of ``n_draws`` draws.
+    coordinate (``converged``) or after ``max_iter`` rounds of ``n_draws`` draws
+    (each from a chain whose autocorrelation time a pilot of at least ``pilot_sweeps``
+    sweeps measures, :func:`simulate_draws`).
 
     ``metric`` (d, d), positive definite -- for :class:`AdjustedPL` the PL's negative
     Hessian at the MPLE -- limits each round's move ``Δ`` to ``sqrt(Δᵀ metric Δ) <=
@@ -189,10 +207,11 @@ def mcmc_mle(lik: Any, theta0: Any, *, n_draws: int = 1000, max_iter: int = 10,
     sims, converged, it = 0, False, 0
     while it < max_iter:
         it += 1
-        draws = simulate_draws(lik, theta, n_draws, seed=int(rng.integers(2**63)))
+        draws = simulate_draws(lik, theta, n_draws, seed=int(rng.integers(2**63)),
+                               pilot_sweeps=pilot_sweeps)
         sims += draws.n_sweeps
         info = fisher_information(lik, draws)
-        log_f = _log_f_of(lik, draws.y)
+        log_f = _log_f_of(lik, draws)
         lf0 = log_f(theta[None])[0]
         lx0 = float(lik.log_prob(theta)[0])
 
@@ -206,9 +225,7 @@ def mcmc_mle(lik: Any, theta0: Any, *, n_draws: int = 1000, max_iter: int = 10,
                 return 1e300
             return -(float(lik.log_prob(t)[0]) - lx0 - M * (logsumexp(lw) - math.log(lw.size)))
 
-        res = minimize(neg, theta, method="Nelder-Mead",
-                       options={"xatol": 1e-6, "fatol": 1e-9, "maxiter": 400 * lik.ndim})
-        new = np.clip(res.x, b[:, 0], b[:, 1])
+        new = np.clip(_argmin_whitened(neg, theta, info), b[:, 0], b[:, 1])
         se = np.sqrt(np.diag(np.linalg.inv(info)))
         moved = np.abs(new - theta) / se
         theta = new
@@ -217,6 +234,26 @@ def mcmc_mle(lik: Any, theta0: Any, *, n_draws: int = 1000, max_iter: int = 10,
             break
     cov = np.linalg.inv(info)
     return MLEResult(theta, cov, it, sims, converged, draws)
+
+
+def _argmin_whitened(f: Any, theta: np.ndarray, info: np.ndarray) -> np.ndarray:
+    """Nelder-Mead from ``theta`` in coordinates ``z = Lᵀ (t - theta)`` with ``info = L Lᵀ``.
+
+    One unit of ``z`` is one asymptotic standard error in every direction, so the
+    simplex (started half a unit wide) is well conditioned however differently the
+    parameters are scaled; it stops at a thousandth of a standard error.
+    """
+    d = theta.size
+    L = np.linalg.cholesky(info)
+
+    def to_theta(z: np.ndarray) -> np.ndarray:
+        return theta + np.linalg.solve(L.T, z)
+
+    simplex = np.vstack([np.zeros(d), 0.5 * np.eye(d)])
+    res = minimize(lambda z: f(to_theta(z)), np.zeros(d), method="Nelder-Mead",
+                   options={"xatol": 1e-3, "fatol": 1e-8, "maxiter": 400 * d,
+                            "initial_simplex": simplex})
+    return to_theta(res.x)
 
 
 def hessian(f: Any, theta: np.ndarray, h: np.ndarray) -> np.ndarray:
@@ -264,6 +301,11 @@ class AdjustedPL(Target):
         0.44 its mean was 0.4-0.9 exact sd off, the moment alignment's 0.0-0.4.
     n_draws : int
         Simulations per Fisher information / MCMC-MLE round.
+    max_rounds : int
+        Most MCMC-MLE rounds (:func:`mcmc_mle`'s ``max_iter``).
+    pilot_sweeps : int
+        Shortest pilot chain measuring the simulator's autocorrelation time
+        (:func:`simulate_draws`); it is at least 50 τ long whatever this says.
     seed : int
         Every simulation flows from it.
     """
@@ -271,7 +313,8 @@ class AdjustedPL(Target):
     data_kind = "configurations"
 
     def __init__(self, pl: Any, lik: Any, *, mode: str = "mcmc_mle", align: str = "moments",
-                 n_draws: int = 1000, seed: int = 0) -> None:
+                 n_draws: int = 1000, max_rounds: int = 10, pilot_sweeps: int = 2000,
+                 seed: int = 0) -> None:
         self.pl, self.lik = pl, lik
         self.param_names = tuple(pl.param_names)
         self.bounds = np.asarray(pl.bounds, dtype=np.float64)
@@ -309,11 +352,12 @@ class AdjustedPL(Target):
         rng = np.random.default_rng(seed)
         if mode == "mcmc_mle":
             res = mcmc_mle(lik, theta_pl, n_draws=n_draws, seed=int(rng.integers(2**63)),
-                           metric=H)
+                           metric=H, max_iter=max_rounds, pilot_sweeps=pilot_sweeps)
             theta_ml, info, sims = res.theta, np.linalg.inv(res.covariance), res.n_simulations
             self.mle = res
         else:
-            draws = simulate_draws(lik, theta_pl, n_draws, seed=int(rng.integers(2**63)))
+            draws = simulate_draws(lik, theta_pl, n_draws, seed=int(rng.integers(2**63)),
+                                   pilot_sweeps=pilot_sweeps)
             info, sims = fisher_information(lik, draws), draws.n_sweeps
             theta_ml = theta_pl
         l_info = np.linalg.cholesky(info)  # I = L_I L_Iᵀ
@@ -358,7 +402,7 @@ def _skew_shift(lik: Any, draws: Draws, info: np.ndarray) -> np.ndarray:
     third cumulant of the score under ``p(y | θ)`` (for a log-linear model, of the
     sufficient statistics), estimated from the draws (Tierney & Kadane 1986).
     """
-    s = _scores(lik, draws.theta, draws.y, _step(lik, draws.theta))
+    s = _scores(lik, draws, _step(lik, draws.theta))
     c = s - s.mean(axis=0)
     kappa = np.einsum("nj,nk,nl->jkl", c, c, c) / c.shape[0]
     M = int(getattr(lik, "n_observations", 1))
@@ -395,53 +439,3 @@ def _pl_moments(pl: Any, theta_pl: np.ndarray, H: np.ndarray, rng: np.random.Gen
         raise ValueError(f"the pseudo-posterior's moments could not be estimated (importance "
                          f"ESS {ess:.0f} of {n}); use align='mode'")
     return mean, cov
-
-
-def parametric_bootstrap(model: Any, data: Any, *, n_boot: int = 200, estimator: str = "pl",
-                         seed: int = 0, **options: Any) -> Any:
-    """Parametric-bootstrap distribution of the maximiser of ``estimator`` (default the MPLE).
-
-    Fits the data, simulates ``n_boot`` data sets of the same size at the
-    estimate with the model's simulator, refits each; returns a posterior-schema
-    Dataset of ``kind="optima"`` (the refits; their quantiles are the bootstrap
-    intervals) with the original estimate as ``map_theta``. Refits on the box's face
-    (a simulated data set without information on a parameter, e.g. a uniform lattice
-    near the critical coupling) are marked in the variable ``on_face`` and named in
-    the posterior's ``bias`` attribute and diagnostics.
-    """
-    from mrfpe.posterior import build
-
-    rng = np.random.default_rng(seed)
-    target = model.target(estimator, data, **options)
-    grid = max(3, int(4096 ** (1 / target.ndim)))
-    theta_hat, value = maximise(target, grid=grid, seed=int(rng.integers(2**31)))
-    lik = model.target("likelihood", data, **{k: v for k, v in options.items()
-                                               if k in ("covariates", "bounds")})
-    draws = simulate_draws(lik, theta_hat, n_boot * lik.n_observations,
-                           seed=int(rng.integers(2**63)))
-    from mrfpe.models.graph import LatticeSpec
-
-    lattice = isinstance(getattr(model, "graph_spec", None), LatticeSpec)
-    shape = tuple(np.shape(data)[-2:]) if lattice else (lik.x.shape[1],)
-    fits, values = [], []
-    for k in range(n_boot):
-        yk = draws.y[k * lik.n_observations:(k + 1) * lik.n_observations]
-        tk = model.target(estimator, yk.reshape(-1, *shape), **options)
-        t, v = maximise(tk, grid=grid, seed=int(rng.integers(2**31)))
-        fits.append(t)
-        values.append(v)
-    fits, b = np.array(fits), np.asarray(target.bounds, dtype=np.float64)
-    tol = 1e-6 * (b[:, 1] - b[:, 0])
-    on_face, bias = (fits - b[:, 0] <= tol) | (b[:, 1] - fits <= tol), None
-    if on_face.any():  # degenerate simulated data (e.g. uniform lattices): the bound is no fit
-        faces = [target.param_names[j] for j in np.flatnonzero(on_face.any(axis=0))]
-        bias = (f"{int(on_face.any(axis=1).sum())} of {n_boot} refits lie on the box's face "
-                f"({', '.join(faces)}): their data sets carry no information there, so "
-                f"intervals reaching that bound are truncated by the box, not estimated")
-    return build(fits, np.array(values), param_names=target.param_names,
-                 map_theta=theta_hat[None], map_log_target=np.array([value]),
-                 sampler="parametric_bootstrap", kind="optima", target=target,
-                 config={"n_boot": n_boot, "estimator": estimator}, seed=seed, bias=bias,
-                 extra_vars={"on_face": (("sample",), on_face.any(axis=1))},
-                 extra_attrs={"simulation_sweeps": draws.n_sweeps, "tau": draws.tau})
-

@@ -33,6 +33,7 @@ from mrfpe.models.options import (
     CODING_OPTION,
     COMMON_OPTIONS,
     PL_ADJUSTED_OPTIONS,
+    adjusted_options,
     block_option_spec,
     bounds_option,
     coding_nodes,
@@ -322,8 +323,7 @@ class MRF(Model):
             pl = est.ConditionalTarget(rows=[design.conditional_rows(x)],
                                        nodes=np.arange(design.graph.n_nodes), **common)
             lik = est.LikelihoodTarget(**common)
-            return AdjustedPL(pl, lik, mode=options["mode"], align=options["align"],
-                              n_draws=options["n_draws"], seed=options["seed"])
+            return AdjustedPL(pl, lik, **adjusted_options(options))
         raise AssertionError(estimator)  # pragma: no cover - check_estimator ran
 
     # -- simulation ------------------------------------------------------------------------------

@@ -29,12 +29,12 @@ def summary_statistics(target: Any, y: np.ndarray, theta: np.ndarray) -> np.ndar
 
 
 def autocorrelation_time(target: Any, theta: np.ndarray, *, seed: int,
-                         max_sweeps: int = 20000) -> float:
+                         max_sweeps: int = 20000, min_sweeps: int = 2000) -> float:
     """Integrated autocorrelation time (sweeps) of the target's simulator at ``theta``.
 
     Runs the simulator one sweep per draw, started from the data, in chunks of
     :data:`PILOT_CHUNK` sweeps until ``emcee.autocorr.integrated_time`` is
-    trustworthy (the chain is at least 50 τ and 2000 sweeps long) or
+    trustworthy (the chain is at least 50 τ and ``min_sweeps`` long) or
     ``max_sweeps`` is reached; returns the largest τ over the standardised
     statistics (``inf`` when the chain is shorter than 20 τ at the cap).
     """
@@ -62,7 +62,7 @@ def autocorrelation_time(target: Any, theta: np.ndarray, *, seed: int,
             return 1.0  # the statistics do not move at all: nothing to wait for
         z = (s[:, keep] - s[:, keep].mean(axis=0)) / sd[keep]
         tau = float(np.max(integrated_time(z[:, None, :], quiet=True)))
-        if length >= 2000 and length >= 50 * tau:
+        if length >= min_sweeps and length >= 50 * tau:
             return tau
         if length >= max_sweeps:
             return math.inf if length < 20 * tau else tau

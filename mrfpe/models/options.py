@@ -17,9 +17,9 @@ from mrfpe.models.graph import Graph
 from mrfpe.targets.options import Option, choice_check, optional
 from mrfpe.validation import check_positive_int
 
-__all__ = ["CODING_OPTION", "COMMON_OPTIONS", "PL_ADJUSTED_OPTIONS", "block_option",
-           "block_option_spec", "bounds_option", "coding_nodes", "covariates_option", "jsonable",
-           "node_blocks", "nonneg_int"]
+__all__ = ["CODING_OPTION", "COMMON_OPTIONS", "PL_ADJUSTED_OPTIONS", "adjusted_options",
+           "block_option", "block_option_spec", "bounds_option", "coding_nodes",
+           "covariates_option", "jsonable", "node_blocks", "nonneg_int"]
 
 
 def covariates_option(name: str, value: Any) -> Any:
@@ -95,8 +95,18 @@ PL_ADJUSTED_OPTIONS: tuple[Option, ...] = (
            "match mode and Hessian, or mean and covariance, to N(MLE, I^-1)"),
     Option("n_draws", "int >= 10", 1000, lambda n, v: check_positive_int(n, v, minimum=10),
            "simulations per Fisher information / MCMC-MLE round"),
+    Option("max_rounds", "int >= 1", 10, lambda n, v: check_positive_int(n, v),
+           "most Monte Carlo MLE rounds"),
+    Option("pilot_sweeps", "int >= 250", 2000,
+           lambda n, v: check_positive_int(n, v, minimum=250),
+           "shortest pilot chain measuring the simulator's autocorrelation time"),
     Option("seed", "int >= 0", 0, nonneg_int, "seed of every simulation of the calibration"),
 )
+
+def adjusted_options(options: Mapping[str, Any]) -> dict[str, Any]:
+    """The :data:`PL_ADJUSTED_OPTIONS` among a target's checked options."""
+    return {o.name: options[o.name] for o in PL_ADJUSTED_OPTIONS}
+
 
 #: ``coding=k``: which of the graph's colour classes a coding estimator sums.
 CODING_OPTION = Option("coding", "int >= 0", 0, nonneg_int,

@@ -27,7 +27,8 @@ from scipy.special import logsumexp
 
 import mrfpe
 from mrfpe.models import get
-from mrfpe.models.brdf_simulate import _term_energies, label_field
+from mrfpe.models.brdf_simulate import label_field
+from mrfpe.models.label_render import term_energies
 from mrfpe.synthetic import make_scene
 from mrfpe.targets import reflectance
 
@@ -49,7 +50,7 @@ swap = np.argsort(code)[swapped]  # labelling holding the swapped combo
 
 def log_z(theta):
     coef = reflectance.coefficients(sc.model, sc.model.to_natural(theta))
-    D = _term_energies(f, coef, lab).reshape(theta.shape[0], len(combos), H, W).sum(axis=2)
+    D = term_energies(f, coef, lab).reshape(theta.shape[0], len(combos), H, W).sum(axis=2)
     N, S = theta.shape[0], B ** K
     la = np.zeros((N, S))
     for c in range(W):

@@ -42,7 +42,8 @@ import numpy as np
 
 import mrfpe
 from mrfpe import models
-from mrfpe.models.calibration import hessian, parametric_bootstrap
+from mrfpe.models.bootstrap import parametric_bootstrap
+from mrfpe.models.calibration import hessian
 from mrfpe.targets import maximise
 
 HERE = Path(__file__).resolve().parent

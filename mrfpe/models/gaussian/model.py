@@ -271,12 +271,11 @@ class GaussianMRF(Model):
             return GaussianLikelihoodTarget(sampler=options["sampler"], **common)
         if estimator == "pl_adjusted":
             from mrfpe.models.calibration import AdjustedPL
+            from mrfpe.models.options import adjusted_options
 
             return AdjustedPL(GaussianPLTarget(**{**common, "estimator": "pl"}),
                               GaussianLikelihoodTarget(**{**common, "estimator": "likelihood"}),
-                              mode=options["mode"], align=options["align"],
-                              n_draws=options["n_draws"],
-                              seed=options["seed"])
+                              **adjusted_options(options))
         raise AssertionError(estimator)  # pragma: no cover - check_estimator ran
 
     # -- parameters in use -----------------------------------------------------------------------

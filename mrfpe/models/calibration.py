@@ -411,16 +411,20 @@ def _skew_shift(lik: Any, draws: Draws, info: np.ndarray) -> np.ndarray:
 
 
 def _pl_moments(pl: Any, theta_pl: np.ndarray, H: np.ndarray, rng: np.random.Generator,
-                n: int = 8192, rounds: int = 4) -> tuple[np.ndarray, np.ndarray]:
+                n: int = 8192, rounds: int = 4, max_rounds: int = 10) -> tuple[np.ndarray,
+                                                                             np.ndarray]:
     """Mean and covariance of exp(PL) on the box by adaptive importance sampling.
 
     Gaussian proposals, 1.5x wider than the current estimate, start at the
-    Laplace approximation ``N(θ_PL, H⁻¹)`` and follow the weighted moments for
-    ``rounds`` rounds (Cappé et al. 2004's adaptation, one component).
+    Laplace approximation ``N(θ_PL, H⁻¹)`` and follow the weighted moments
+    (Cappé et al. 2004's adaptation, one component) for ``rounds`` rounds, and on
+    while the importance ESS stays below ``n / 10`` (a skewed or curved exp(PL)),
+    up to ``max_rounds``. The last round's moments are refused if its ESS is below
+    ``max(50 d, n / 40)``.
     """
     mean, cov = theta_pl.copy(), np.linalg.inv(H)
     d = theta_pl.size
-    for _ in range(rounds):
+    for k in range(max_rounds):
         try:
             chol = 1.5 * np.linalg.cholesky(cov)
         except np.linalg.LinAlgError:
@@ -435,7 +439,9 @@ def _pl_moments(pl: Any, theta_pl: np.ndarray, H: np.ndarray, rng: np.random.Gen
         ess = 1.0 / np.sum(w**2)
         mean = w @ th
         cov = (th - mean).T @ ((th - mean) * w[:, None])
-    if not ess >= n / 20:
+        if k + 1 >= rounds and ess >= n / 10:
+            break
+    if not ess >= max(50 * d, n / 40):
         raise ValueError(f"the pseudo-posterior's moments could not be estimated (importance "
-                         f"ESS {ess:.0f} of {n}); use align='mode'")
+                         f"ESS {ess:.0f} of {n} after {k + 1} rounds); use align='mode'")
     return mean, cov

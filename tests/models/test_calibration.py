@@ -63,6 +63,19 @@ def test_adjustment_refuses_what_it_cannot_do():
         crf.target("pl_adjusted", x, covariates={"z": np.zeros((8, 8))})
     with pytest.raises(ValueError, match="mode"):
         m.target("pl_adjusted", x, mode="one_step")
+    with pytest.raises(ValueError, match="pilot_sweeps"):
+        m.target("pl_adjusted", x, pilot_sweeps=100)
+    with pytest.raises(ValueError, match="max_rounds"):
+        m.target("pl_adjusted", x, max_rounds=0)
+
+
+def test_rounds_and_pilot_reach_the_calibration(ising):
+    """One round stops after one batch of draws; a short pilot still measures 50 tau."""
+    m, x, _exact, lik, _pl = ising
+    adj = m.target("pl_adjusted", x, seed=2, max_rounds=1, pilot_sweeps=250)
+    assert adj.mle.n_iterations == 1
+    d = simulate_draws(lik, adj.theta_pl, 20, seed=0, pilot_sweeps=250)
+    assert d.burn_in >= 10 * d.tau
 
 
 def test_moment_alignment_has_the_mean_and_covariance_it_promises(ising):

@@ -1,0 +1,149 @@
+"""The classification benchmark's specimens with calibrated posteriors beside exp(PL_s)'s.
+
+For every specimen of ``../classification`` (12 materials x 4 specimens per BRDF model,
+20 labels; the scene built as :func:`mrfpe.experiments.classification.trial` builds it,
+from the committed trial file's seed, but at :data:`SHAPE` pixels) this computes
+
+* ``pl``        PMC (:data:`PMC`) on the study's target ``pls`` (7.5-7.7): the
+                pseudo-posterior exp(PL_s) itself, untempered;
+* ``adjusted``  the BRDF model's ``"pl_adjusted"`` target with ``prior="range"`` (it
+                calibrates the same ``pls``; :class:`mrfpe.models.calibration.AdjustedPL`)
+                built with :data:`CALIBRATION`, and PMC (:data:`PMC`) on it.
+
+The classification study's scenes are 100 x 100 pixels; there the label chain's
+autocorrelation time was 29 sweeps (one Ward specimen), so one Monte Carlo MLE round of
+100 draws took 4600 sweeps and ~5 minutes, about 16 core-hours for the 96 specimens.
+At 50 x 50 a specimen takes 1.5-2.5 minutes (two rounds: 2.5-3 minutes).
+
+It records both final clouds (particles, log weights, MAP), the calibration (MPLE, the
+adjusted mode, ``W``, Fisher information, the PL's Hessian, the simulator's
+autocorrelation time, sweeps), the PMC diagnostics and wall times. One netCDF per
+specimen in ``trials/``; a file that exists is skipped, so an interrupted run resumes;
+``--shard k n`` takes every n-th specimen from the k-th. A specimen whose calibration
+is refused (an MPLE on the box's face, a singular Fisher information) is recorded
+with the reason and its ``pl`` cloud.
+
+    python docs/results/calibrated_classification/run.py --shard 0 2   # and --shard 1 2
+    python docs/results/calibrated_classification/report.py
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+
+import mrfpe
+from mrfpe.experiments.problems import child_seeds
+from mrfpe.netcdf import write_atomic
+
+HERE = Path(__file__).resolve().parent
+TRIALS = HERE / "trials"
+SOURCE = HERE.parent / "classification"
+#: Image size of every specimen (the classification study's is 100 x 100).
+SHAPE = (50, 50)
+#: ``pl_adjusted`` options: one Monte Carlo MLE round of 100 draws at the MPLE (the Fisher
+#: information's sd ratios then carry ~7 % Monte Carlo error; a second round doubled the
+#: cost), its pilot chain at least 500 sweeps (and 50 tau) long.
+CALIBRATION = {"n_draws": 100, "max_rounds": 1, "pilot_sweeps": 500}
+#: PMC options for both posteriors (1000 particles left a third of the exp(PL_s) runs
+#: flagged unreliable at 50 x 50).
+PMC = {"n_samples": 4000}
+
+
+def specimens(config: dict) -> list[tuple[dict, int]]:
+    """(cell, trial seed) of every committed classification trial, specimen by specimen: all
+    materials and both models of specimen 0 first, so that a partial run covers every class."""
+    out = []
+    for path in sorted((SOURCE / "trials").glob("*.nc")):
+        with xr.open_dataset(path) as ds:
+            out.append((json.loads(ds.attrs["cell"]), int(ds.attrs["seed"])))
+    return sorted(out, key=lambda cs: (cs[0]["specimen"], cs[0]["material"], cs[0]["brdf"]))
+
+
+def scene_of(config: dict, cell: dict, seed: int):
+    """The specimen's scene (at :data:`SHAPE`) and truth, built as the classification study does."""
+    brdf, material, specimen = cell["brdf"], cell["material"], cell["specimen"]
+    s_scene = child_seeds(seed, 3)[0]
+    model = mrfpe.brdf.get(brdf)
+    u = np.asarray(config["materials"][brdf][material], dtype=float)
+    kw = dict(brdf=brdf, theta=model.to_natural(u), shape=SHAPE,
+              n_labels=config["n_labels"], surface=config["surface"], seed=s_scene)
+    clean = mrfpe.synthetic.make_scene(**kw)
+    noise = config["noise_levels"][specimen % len(config["noise_levels"])] * float(
+        np.percentile(clean.image, 99))
+    scene = mrfpe.synthetic.make_scene(**kw, noise=noise) if noise > 0 else clean
+    return scene, u
+
+
+def cloud(post: xr.Dataset, prefix: str) -> dict:
+    """A PMC posterior's final cloud and diagnostics as Dataset variables/attributes."""
+    return {f"{prefix}_theta": (("sample", "param"), post["theta"].values),
+            f"{prefix}_log_weight": (("sample",), post["log_weight"].values),
+            f"{prefix}_map": (("param",), post["map_theta"].values[-1]),
+            f"{prefix}_time_s": ((), float(post.attrs["wall_time_s"])),
+            f"{prefix}_reliable": ((), bool(post.attrs.get("diag_reliable", True)))}
+
+
+def run_one(config: dict, cell: dict, seed: int) -> xr.Dataset:
+    scene, u = scene_of(config, cell, seed)
+    s_pl, s_adj, s_cal = (int(s) for s in np.random.SeedSequence([seed, 7]).generate_state(3))
+    pl = mrfpe.targets.get(config["target"], scene, **config["target_options"])
+    data = cloud(mrfpe.sample("pmc", pl, seed=s_pl, **PMC), "pl")
+    attrs: dict = {"cell": json.dumps(cell), "seed": seed, "calibration": json.dumps(CALIBRATION),
+                   "pmc": json.dumps(PMC), "shape": json.dumps(SHAPE),
+                   "mrfpe_version": mrfpe.__version__}
+    t0 = time.perf_counter()
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            adj = mrfpe.models.get("brdf").target("pl_adjusted", scene, prior="range",
+                                                  seed=s_cal, **CALIBRATION)
+    except ValueError as err:  # refused: recorded, not hidden
+        attrs["refused"] = str(err)
+    else:
+        build_s = time.perf_counter() - t0
+        data.update(cloud(mrfpe.sample("pmc", adj, seed=s_adj, **PMC), "adjusted"))
+        mle = adj.mle
+        d2 = ("param", "param2")
+        data.update({
+            "theta_mple": (("param",), adj.theta_pl), "theta_adjusted": (("param",), adj.theta_ml),
+            "W": (d2, adj.W), "fisher_information": (d2, adj.fisher_information),
+            "pl_hessian": (d2, adj.pl_hessian), "build_time_s": ((), build_s),
+            "simulation_sweeps": ((), adj.n_simulation_sweeps),
+            "tau": ((), mle.draws.tau), "mle_rounds": ((), mle.n_iterations),
+            "mle_converged": ((), mle.converged)})
+    data["truth"] = (("param",), u)
+    names = list(pl.param_names)
+    return xr.Dataset(data, coords={"param": names, "param2": names}, attrs=attrs)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--shard", nargs=2, type=int, default=(0, 1), metavar=("K", "N"))
+    ap.add_argument("--limit", type=int, default=None, help="at most this many specimens")
+    args = ap.parse_args()
+    config = json.loads((SOURCE / "config.json").read_text())["config"]
+    TRIALS.mkdir(exist_ok=True)
+    todo = specimens(config)[args.shard[0]::args.shard[1]][:args.limit]
+    for cell, seed in todo:
+        path = TRIALS / ("brdf={brdf},material={material},specimen={specimen}.nc".format(**cell))
+        if path.exists():
+            continue
+        t0 = time.perf_counter()
+        ds = run_one(config, cell, seed)
+        ds.attrs["wall_time_s"] = time.perf_counter() - t0
+        write_atomic(ds, path)
+        print(f"{path.name}: {ds.attrs['wall_time_s']:.0f} s"
+              + (f" (refused: {ds.attrs['refused']})" if "refused" in ds.attrs else ""),
+              flush=True)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

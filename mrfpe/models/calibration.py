@@ -337,8 +337,8 @@ class AdjustedPL(Target):
         try:
             m_chol = np.linalg.cholesky(H).T  # H = MᵀM
             sd = np.sqrt(np.diag(np.linalg.inv(H)))
-        except np.linalg.LinAlgError:
-            m_chol, sd = None, np.full(b.shape[0], np.inf)
+        except np.linalg.LinAlgError:  # no sd: only the face itself can be tested
+            m_chol, sd = None, np.zeros(b.shape[0])
         edge = (dist < 1e-6 * (b[:, 1] - b[:, 0])) | (dist < sd)
         if edge.any():
             raise ValueError(f"the MPLE lies on (or within one PL sd of) the bounds' face for "
@@ -348,7 +348,10 @@ class AdjustedPL(Target):
                              f"information on these parameters)")
         if m_chol is None:
             raise ValueError(f"the PL's Hessian is not negative definite at the MPLE "
-                             f"{theta_pl.round(4).tolist()}: no curvature to adjust")
+                             f"{theta_pl.round(4).tolist()} (eigenvalues of its negative "
+                             f"{np.linalg.eigvalsh(H).round(3).tolist()}): a ridge or saddle "
+                             f"of the PL, i.e. a combination of {list(self.param_names)} the "
+                             f"data do not identify; no curvature to adjust")
         rng = np.random.default_rng(seed)
         if mode == "mcmc_mle":
             res = mcmc_mle(lik, theta_pl, n_draws=n_draws, seed=int(rng.integers(2**63)),

@@ -16,6 +16,7 @@ from mrfpe.models.calibration import (
     simulate_draws,
 )
 from mrfpe.targets import maximise
+from mrfpe.targets.base import Target
 
 
 @pytest.fixture(scope="module")
@@ -67,6 +68,22 @@ def test_adjustment_refuses_what_it_cannot_do():
         m.target("pl_adjusted", x, pilot_sweeps=100)
     with pytest.raises(ValueError, match="max_rounds"):
         m.target("pl_adjusted", x, max_rounds=0)
+
+
+class _Ridge(Target):
+    """A pseudolikelihood that does not depend on its second parameter: no curvature there."""
+
+    param_names = ("a", "b")
+    bounds = np.array([[0.0, 1.0], [0.0, 1.0]])
+
+    def _log_prob(self, theta):
+        return -1e3 * (theta[:, 0] - 0.4) ** 2
+
+
+def test_a_ridge_is_named_as_a_ridge_not_as_a_face(ising):
+    _m, _x, _exact, lik, _pl = ising
+    with pytest.raises(ValueError, match=r"not negative definite.*ridge or saddle"):
+        AdjustedPL(_Ridge(), lik)
 
 
 def test_rounds_and_pilot_reach_the_calibration(ising):

@@ -22,7 +22,7 @@ import xarray as xr
 
 from mrfpe.classify import error_stats, knn_accuracy, similarity_matrix
 from mrfpe.experiments.writeup import markdown_table, write_report
-from mrfpe.posterior import ess, weighted_cov, weighted_mean
+from mrfpe.posterior import ess, weighted_cov
 from mrfpe.resampling import resample
 
 HERE = Path(__file__).resolve().parent
@@ -52,6 +52,19 @@ def feature_set(ds: xr.Dataset, prefix: str) -> xr.Dataset:
     return post.isel(sample=idx).assign(log_weight=("sample", np.zeros(SET_SIZE)))
 
 
+def gaussian_set(ds: xr.Dataset, which: str) -> xr.Dataset:
+    """:data:`SET_SIZE` points from the normal with the target's own centre and covariance
+    (:func:`target_moments`; the PL's inverse Hessian, or I⁻¹), free of sampling error."""
+    names = [str(p) for p in ds["param"].values]
+    cov = np.linalg.inv(ds["pl_hessian" if which == "pl" else "fisher_information"].values)
+    centre = ds["theta_mple" if which == "pl" else "theta_adjusted"].values
+    z = np.random.default_rng(0).standard_normal((SET_SIZE, centre.size))
+    theta = centre + z @ np.linalg.cholesky(cov).T
+    return xr.Dataset({"theta": (("sample", "param"), theta),
+                       "log_weight": (("sample",), np.zeros(SET_SIZE)),
+                       "map_theta": (("step", "param"), centre[None])}, coords={"param": names})
+
+
 def load() -> list[xr.Dataset]:
     out = []
     for path in sorted((HERE / "trials").glob("*.nc")):
@@ -60,41 +73,77 @@ def load() -> list[xr.Dataset]:
     return out
 
 
+def target_moments(ds: xr.Dataset) -> dict[str, np.ndarray]:
+    """Each target's own centre and sd: exp(PL_s)'s Laplace approximation (MPLE, the PL's
+    Hessian there) and the calibrated target's mean and covariance (θ_ML + δ, I⁻¹), which
+    ``align="moments"`` gives it by construction."""
+    return {"pl_centre": ds["theta_mple"].values,
+            "pl_sd": np.sqrt(np.diag(np.linalg.inv(ds["pl_hessian"].values))),
+            "adj_centre": ds["theta_adjusted"].values,
+            "adj_sd": np.sqrt(np.diag(np.linalg.inv(ds["fisher_information"].values)))}
+
+
+def span(v: np.ndarray) -> str:
+    return f"{np.median(v):.2f} [{v.min():.2f}, {v.max():.2f}]"
+
+
 def shifts(group: list[xr.Dataset]) -> list[list]:
-    """Per parameter: how far calibration moved the mean (in exp(PL) sd) and scaled the sd."""
+    """Per parameter: the calibrated target's centre move and sd ratio against exp(PL_s)'s,
+    each target's distance from the truth in its own sd, and each PMC cloud's weighted sd
+    against its target's sd."""
     names = [str(p) for p in group[0]["param"].values]
-    z, ratio, err_pl, err_adj = [], [], [], []
+    cols: dict[str, list] = {k: [] for k in ("move", "ratio", "err_pl", "err_adj", "pmc_pl",
+                                              "pmc_adj")}
     for ds in group:
-        a, b = posterior(ds, "pl"), posterior(ds, "adjusted")
-        sd_a, sd_b = np.sqrt(np.diag(weighted_cov(a))), np.sqrt(np.diag(weighted_cov(b)))
-        z.append((weighted_mean(b) - weighted_mean(a)) / sd_a)
-        ratio.append(sd_b / sd_a)
-        truth = ds["truth"].values
-        err_pl.append(np.abs(weighted_mean(a) - truth) / sd_a)
-        err_adj.append(np.abs(weighted_mean(b) - truth) / sd_b)
-    z, ratio, err_pl, err_adj = map(np.array, (z, ratio, err_pl, err_adj))
+        m, truth = target_moments(ds), ds["truth"].values
+        cols["move"].append((m["adj_centre"] - m["pl_centre"]) / m["pl_sd"])
+        cols["ratio"].append(m["adj_sd"] / m["pl_sd"])
+        cols["err_pl"].append(np.abs(m["pl_centre"] - truth) / m["pl_sd"])
+        cols["err_adj"].append(np.abs(m["adj_centre"] - truth) / m["adj_sd"])
+        for prefix, key in (("pl", "pmc_pl"), ("adjusted", "pmc_adj")):
+            sd = np.sqrt(np.diag(weighted_cov(posterior(ds, prefix))))
+            cols[key].append(sd / m["pl_sd" if prefix == "pl" else "adj_sd"])
+    a = {k: np.array(v) for k, v in cols.items()}
+    return [[n, *(span(a[k][:, j]) for k in cols)] for j, n in enumerate(names)]
 
-    def span(v: np.ndarray) -> str:
-        return f"{np.median(v):.2f} [{v.min():.2f}, {v.max():.2f}]"
 
-    return [[n, span(z[:, j]), span(ratio[:, j]), span(err_pl[:, j]), span(err_adj[:, j])]
-            for j, n in enumerate(names)]
+def covered(group: list[xr.Dataset]) -> tuple[int, int]:
+    """Specimens whose true parameters lie within 2 sd of the centre in every parameter,
+    for exp(PL_s) and for the calibrated target."""
+    hits = np.array([[np.all(np.abs(m["pl_centre"] - t) <= 2 * m["pl_sd"]),
+                      np.all(np.abs(m["adj_centre"] - t) <= 2 * m["adj_sd"])]
+                     for m, t in ((target_moments(ds), ds["truth"].values) for ds in group)])
+    return int(hits[:, 0].sum()), int(hits[:, 1].sum())
 
 
 def classification(group: list[xr.Dataset], jobs: int) -> str:
+    """Miss / WNN / NN1 and 1-NN accuracy per distance, both kinds of posterior, from the PMC
+    clouds and from each target's own moments; materials left with fewer than two calibrated
+    specimens cannot be classified and are left out."""
     classes = np.array([json.loads(ds.attrs["cell"])["material"] for ds in group])
-    rows = []
-    for label, name, params in COLUMNS:
-        row = [label]
-        for prefix in ("pl", "adjusted"):
-            S = similarity_matrix([feature_set(ds, prefix) for ds in group], name,
-                                  n_jobs=jobs, **params)
-            st = error_stats(S, classes)
-            row += [f"{st['miss']} / {st['wnn']} / {st['nn1']}",
-                    f"{knn_accuracy(S, classes):.2f}"]
-        rows.append(row)
-    return markdown_table(["distance", "exp(PL_s): Miss / WNN / NN1", "1-NN acc.",
-                           "calibrated: Miss / WNN / NN1", "1-NN acc."], rows)
+    keep = np.isin(classes, [c for c in set(classes.tolist()) if np.sum(classes == c) >= 2])
+    group, classes = [ds for ds, k in zip(group, keep, strict=True) if k], classes[keep]
+    out = [f"{len(group)} specimens of {len(set(classes.tolist()))} materials (materials with "
+           f"fewer than two calibrated specimens left out); lower Miss / WNN / NN1 is better."]
+    kinds = {"the PMC clouds": (lambda ds: feature_set(ds, "pl"),
+                            lambda ds: feature_set(ds, "adjusted")),
+             "each target's own moments (normal sets)": (lambda ds: gaussian_set(ds, "pl"),
+                                                          lambda ds: gaussian_set(ds, "adj"))}
+    for kind, makers in kinds.items():
+        sets = [[make(ds) for ds in group] for make in makers]
+        rows = []
+        for label, name, params in COLUMNS:
+            row = [label]
+            for posts in sets:
+                S = similarity_matrix(posts, name, n_jobs=jobs, **params)
+                st = error_stats(S, classes)
+                row += [f"{st['miss']} / {st['wnn']} / {st['nn1']}",
+                        f"{knn_accuracy(S, classes):.2f}"]
+            rows.append(row)
+        out.append(f"### From {kind}\n\n" + markdown_table(
+            ["distance", "exp(PL_s): Miss / WNN / NN1", "1-NN acc.",
+             "calibrated: Miss / WNN / NN1", "1-NN acc."], rows))
+    return "\n\n".join(out)
 
 
 def main() -> None:
@@ -128,14 +177,18 @@ def main() -> None:
             f"sweeps, Monte Carlo MLE rounds {np.median(cost[:, 3]):.0f}. Kish ESS of the "
             f"clouds (median of 1000 particles): exp(PL_s) {ess_pl:.0f}, calibrated "
             f"{ess_adj:.0f}; PMC runs flagged unreliable: {unreliable} of {2 * len(both)}.\n\n"
-            "What calibration changed, per parameter (median [min, max] over specimens): the "
-            "mean's move in exp(PL_s) posterior sd, the sd ratio calibrated / exp(PL_s), and "
-            "each posterior's distance from the material's true parameters in its own sd.\n\n"
-            + markdown_table(["param", "mean move (PL sd)", "sd ratio", "|PL mean - truth| / sd",
-                              "|calibrated mean - truth| / sd"], shifts(both))
-            + f"\n\nClassification of the {len(both)} calibrated specimens "
-            f"({len(set(json.loads(ds.attrs['cell'])['material'] for ds in both))} materials; "
-            "lower Miss / WNN / NN1 is better):\n\n" + classification(both, args.jobs))
+            "What calibration changed, per parameter (median [min, max] over specimens), "
+            "measured on the targets themselves: the centre's move in exp(PL_s) sd, the sd "
+            "ratio calibrated / exp(PL_s), each target's distance from the material's true "
+            "parameters in its own sd, and each PMC cloud's weighted sd over its target's "
+            "sd.\n\n"
+            + markdown_table(["param", "centre move (PL sd)", "sd ratio",
+                              "|MPLE − truth| / PL sd", "|calibrated − truth| / its sd",
+                              "PMC sd / sd, exp(PL_s)", "PMC sd / sd, calibrated"],
+                             shifts(both))
+            + "\n\nTrue parameters within 2 sd of the centre in every parameter: "
+            "exp(PL_s) {} of {n}, calibrated {} of {n}.".format(*covered(both), n=len(both))
+            + "\n\nClassification: " + classification(both, args.jobs))
     write_report(HERE, "Classification with calibrated posteriors", sections)
 
 

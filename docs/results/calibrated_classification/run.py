@@ -19,7 +19,8 @@ It records both final clouds (particles, log weights, MAP), the calibration (MPL
 adjusted mode, ``W``, Fisher information, the PL's Hessian, the simulator's
 autocorrelation time, sweeps), the PMC diagnostics and wall times. One netCDF per
 specimen in ``trials/``; a file that exists is skipped, so an interrupted run resumes;
-``--shard k n`` takes every n-th specimen from the k-th. A specimen whose calibration
+``--shard k n`` takes every n-th specimen from the k-th (``--reverse`` from the shard's end,
+for a second process on an unfinished shard). A specimen whose calibration
 is refused (an MPLE on the box's face, a singular Fisher information) is recorded
 with the reason and its ``pl`` cloud.
 
@@ -128,10 +129,13 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--shard", nargs=2, type=int, default=(0, 1), metavar=("K", "N"))
     ap.add_argument("--limit", type=int, default=None, help="at most this many specimens")
+    ap.add_argument("--reverse", action="store_true",
+                    help="take the shard from its end (a second process on an unfinished shard)")
     args = ap.parse_args()
     config = json.loads((SOURCE / "config.json").read_text())["config"]
     TRIALS.mkdir(exist_ok=True)
-    todo = specimens(config)[args.shard[0]::args.shard[1]][:args.limit]
+    todo = specimens(config)[args.shard[0]::args.shard[1]]
+    todo = (todo[::-1] if args.reverse else todo)[:args.limit]
     for cell, seed in todo:
         path = TRIALS / ("brdf={brdf},material={material},specimen={specimen}.nc".format(**cell))
         if path.exists():

@@ -349,9 +349,9 @@ class AdjustedPL(Target):
         if m_chol is None:
             raise ValueError(f"the PL's Hessian is not negative definite at the MPLE "
                              f"{theta_pl.round(4).tolist()} (eigenvalues of its negative "
-                             f"{np.linalg.eigvalsh(H).round(3).tolist()}): a ridge or saddle "
-                             f"of the PL, i.e. a combination of {list(self.param_names)} the "
-                             f"data do not identify; no curvature to adjust")
+                             f"{np.linalg.eigvalsh(H).round(3).tolist()}): a saddle where the "
+                             f"maximiser stopped (a negative eigenvalue) or a ridge of "
+                             f"{list(self.param_names)} the data do not identify (a zero one)")
         rng = np.random.default_rng(seed)
         if mode == "mcmc_mle":
             res = mcmc_mle(lik, theta_pl, n_draws=n_draws, seed=int(rng.integers(2**63)),

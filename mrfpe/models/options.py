@@ -103,6 +103,7 @@ PL_ADJUSTED_OPTIONS: tuple[Option, ...] = (
     Option("seed", "int >= 0", 0, nonneg_int, "seed of every simulation of the calibration"),
 )
 
+
 def adjusted_options(options: Mapping[str, Any]) -> dict[str, Any]:
     """The :data:`PL_ADJUSTED_OPTIONS` among a target's checked options."""
     return {o.name: options[o.name] for o in PL_ADJUSTED_OPTIONS}

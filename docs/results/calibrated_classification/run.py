@@ -13,7 +13,7 @@ from the committed trial file's seed, but at :data:`SHAPE` pixels) this computes
 The classification study's scenes are 100 x 100 pixels; there the label chain's
 autocorrelation time was 29 sweeps (one Ward specimen), so one Monte Carlo MLE round of
 100 draws took 4600 sweeps and ~5 minutes, about 16 core-hours for the 96 specimens.
-At 50 x 50 a specimen takes 1.5-2.5 minutes (two rounds: 2.5-3 minutes).
+At 50 x 50 a specimen took a median 1.5 minutes (at most 9).
 
 It records both final clouds (particles, log weights, MAP), the calibration (MPLE, the
 adjusted mode, ``W``, Fisher information, the PL's Hessian, the simulator's

@@ -10,7 +10,10 @@ from mrfpe.netcdf import read_attrs
 from mrfpe.study import config_hash
 
 RESULTS = Path(__file__).resolve().parents[2] / "docs" / "results"
-TRIAL_DIRS = sorted({p.parent for p in RESULTS.glob("**/trials/*.nc")})
+#: Study outputs: a ``trials/`` folder beside the study's ``config.json`` (results scripts that
+#: are not studies, such as ``calibrated_classification/run.py``, write neither).
+TRIAL_DIRS = sorted({p.parent for p in RESULTS.glob("**/trials/*.nc")
+                     if (p.parent.parent / "config.json").exists()})
 
 
 @pytest.mark.skipif(not TRIAL_DIRS, reason="no committed results in this checkout")

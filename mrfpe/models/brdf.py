@@ -23,6 +23,7 @@ from mrfpe.models.brdf_simulate import (
     DEFAULT_THIN,
     PRIORS,
     _energies,
+    _unary_energies,
     label_field,
     simulate_labels,
 )
@@ -84,17 +85,22 @@ class BRDFLikelihood(Target):
     def unnormalised(self, theta: Any, x: Any = None) -> np.ndarray:
         """``-sum_k U(x_k; theta_j)`` (N,) for labellings ``x`` (default the observed one);
         ``-inf`` outside the unit cube."""
-        theta = as_theta_batch(theta, self.ndim)
         x = _labellings(self.field, self.x if x is None else x, "x")[0]  # (M, n_nodes)
-        out = np.full(theta.shape[0], -np.inf)
-        inside = self.in_bounds(theta)
-        if inside.any():  # the labellings' geometry once, every parameter vector's radiance
-            model = self.scene.model
-            coef = reflectance.coefficients(model, model.to_natural(theta[inside]))
-            ok = np.all(np.isfinite(coef), axis=1)
-            u = _energies(self.field, np.where(ok[:, None], coef, 0.0), x).sum(axis=1)
-            out[inside] = np.where(ok, -u, -np.inf)
+        rows, coef, out = self._coefficients(theta)
+        if rows.size:  # the labellings' geometry once, every parameter vector's radiance
+            out[rows] = -_energies(self.field, coef, x).sum(axis=1)
         return out
+
+    def _coefficients(self, theta: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Rows of ``theta`` inside the unit cube with finite radiance coefficients, their
+        coefficients, and an output of ``-inf`` (N,) for the others."""
+        theta = as_theta_batch(theta, self.ndim)
+        out = np.full(theta.shape[0], -np.inf)
+        rows = np.flatnonzero(self.in_bounds(theta))
+        model = self.scene.model
+        coef = reflectance.coefficients(model, model.to_natural(theta[rows]))
+        ok = np.all(np.isfinite(coef), axis=1)
+        return rows[ok], coef[ok], out
 
     def log_f_of_draws(self, y: Any) -> Callable[[Any], np.ndarray]:
         """``theta (N, d) -> -U(y_k; theta_j)`` (N, K) for labellings ``y`` reused at many theta.
@@ -108,17 +114,14 @@ class BRDFLikelihood(Target):
         check_memory(40.0 * x.shape[0] * self.field.tri.shape[0],
                      f"the renders of {x.shape[0]} labellings", "pass fewer draws")
         feats = draw_features(self.field, x).reshape(-1, 5)
-        unary = self.field.unary[np.arange(self.field.n_nodes)[None, :], x].sum(axis=1)
-        model, K = self.scene.model, x.shape[0]
+        unary, K = _unary_energies(self.field, x), x.shape[0]
 
         def log_f(theta: Any) -> np.ndarray:
-            theta = as_theta_batch(theta, self.ndim)
-            out = np.full((theta.shape[0], K), -np.inf)
-            for j in np.flatnonzero(self.in_bounds(theta)):
-                coef = reflectance.coefficients(model, model.to_natural(theta[j:j + 1]))
-                if np.all(np.isfinite(coef)):
-                    rad = reflectance.radiance(coef, feats).reshape(1, K, -1)
-                    out[j] = -(data_terms(self.field, rad)[0].sum(axis=1) + unary)
+            rows, coef, first = self._coefficients(theta)
+            out = np.repeat(first[:, None], K, axis=1)
+            for j, c in zip(rows, coef, strict=True):  # one row at a time: K n_tri floats each
+                rad = reflectance.radiance(c[None], feats).reshape(1, K, -1)
+                out[j] = -(data_terms(self.field, rad)[0].sum(axis=1) + unary)
             return out
 
         return log_f

@@ -114,7 +114,13 @@ import numpy as np
 import scipy.sparse as sp
 
 from mrfpe.budget import check_memory
-from mrfpe.models.label_render import BATCH_TRIANGLES, data_terms, memo_for, term_energies
+from mrfpe.models.label_render import (
+    BATCH_TRIANGLES,
+    data_terms,
+    memo_at,
+    memo_for,
+    term_energies,
+)
 from mrfpe.targets import reflectance
 from mrfpe.targets.brdf_target import auto_sigma_b
 from mrfpe.targets.energy import DATA_TERMS
@@ -300,11 +306,13 @@ def _field(scene: Any, options: dict[str, Any]) -> LabelField:
 
 def _energies(field: LabelField, coef: np.ndarray, x: np.ndarray) -> np.ndarray:
     """``U`` (N, M) of labellings ``x`` (M, n_nodes) at coefficient rows ``coef`` (N, 5)."""
-    memo = field.memo.get("radiance")
-    if memo is None or coef.shape[0] != 1 or not np.array_equal(memo.coef, coef):
-        memo = None
-    data = term_energies(field, coef, x, memo).sum(axis=2)
-    return data + field.unary[np.arange(field.n_nodes)[None, :], x].sum(axis=1)
+    data = term_energies(field, coef, x, memo_at(field, coef)).sum(axis=2)
+    return data + _unary_energies(field, x)
+
+
+def _unary_energies(field: LabelField, x: np.ndarray) -> np.ndarray:
+    """``sum_i E0_i(x_i)`` (M,) of labellings ``x`` (M, n_nodes)."""
+    return field.unary[np.arange(field.n_nodes)[None, :], x].sum(axis=1)
 
 
 def label_energy(scene: Any, theta: Any, labels: Any, **options: Any) -> np.ndarray | float:

@@ -33,8 +33,8 @@ from mrfpe.budget import memory_budget
 from mrfpe.shading import shading_features, triangle_geometry
 from mrfpe.targets import reflectance
 
-__all__ = ["MEMO_BUDGET_FRACTION", "RadianceMemo", "data_terms", "draw_features", "memo_for",
-           "term_energies"]
+__all__ = ["MEMO_BUDGET_FRACTION", "RadianceMemo", "data_terms", "draw_features", "memo_at",
+           "memo_for", "term_energies"]
 
 #: Triangles rendered per numpy batch (bounds the working memory, ~1 kB per triangle).
 BATCH_TRIANGLES = 65536
@@ -52,14 +52,26 @@ def _features(field: Any, nodes: np.ndarray, labels: np.ndarray) -> np.ndarray:
     return reflectance.features(sc.model, feats, weight)
 
 
+def _batched_features(field: Any, nodes: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """:func:`_features` (m, 5) of any number of triangles, :data:`BATCH_TRIANGLES` at a time."""
+    out = np.empty((nodes.shape[0], 5))
+    for a in range(0, nodes.shape[0], BATCH_TRIANGLES):
+        sl = slice(a, a + BATCH_TRIANGLES)
+        out[sl] = _features(field, nodes[sl], labels[sl])
+    return out
+
+
 def _render(field: Any, coef: np.ndarray, nodes: np.ndarray,
             labels: np.ndarray) -> np.ndarray:
     """Radiance (N, m) at coefficient rows (N, 5) of triangles given as (m, 3) nodes/labels."""
-    out = np.empty((coef.shape[0], nodes.shape[0]))
-    for a in range(0, nodes.shape[0], BATCH_TRIANGLES):
-        sl = slice(a, a + BATCH_TRIANGLES)
-        out[:, sl] = reflectance.radiance(coef, _features(field, nodes[sl], labels[sl]))
-    return out
+    return reflectance.radiance(coef, _batched_features(field, nodes, labels))
+
+
+def _triangles(field: Any, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Vertex nodes and labels (M * n_tri, 3) of every triangle of labellings (M, n_nodes)."""
+    tri = field.tri
+    nodes = np.broadcast_to(tri, (labels.shape[0], *tri.shape)).reshape(-1, 3)
+    return nodes, labels[:, tri].reshape(-1, 3)
 
 
 class RadianceMemo:
@@ -114,16 +126,26 @@ def _keys(field: Any, labels: np.ndarray) -> np.ndarray:
     return ((np.arange(tri.shape[0]) * B + lab[..., 0]) * B + lab[..., 1]) * B + lab[..., 2]
 
 
+def memo_at(field: Any, coef: np.ndarray) -> RadianceMemo | None:
+    """The field's memo if it holds the radiances of ``coef`` (one row), else None."""
+    memo = field.memo.get("radiance")
+    if memo is None or coef.shape[0] != 1 or not np.array_equal(memo.coef, coef):
+        return None
+    return memo
+
+
 def memo_for(field: Any, coef: np.ndarray) -> RadianceMemo | None:
     """The field's memo for ``coef`` (one row), made or reset as needed; None if too big."""
     if RadianceMemo.nbytes(field) > MEMO_BUDGET_FRACTION * memory_budget():
         return None
-    memo = field.memo.get("radiance")
+    memo = memo_at(field, coef)
     if memo is None:
-        memo = field.memo["radiance"] = RadianceMemo(field, coef)
-    elif not np.array_equal(memo.coef, coef.reshape(1, 5)):
-        memo.coef = np.array(coef, dtype=np.float64).reshape(1, 5)
-        memo.values.fill(np.nan)
+        memo = field.memo.get("radiance")
+        if memo is None:
+            memo = field.memo["radiance"] = RadianceMemo(field, coef)
+        else:  # the memo of another theta: reset
+            memo.coef = np.array(coef, dtype=np.float64).reshape(1, 5)
+            memo.values.fill(np.nan)
     return memo
 
 
@@ -134,20 +156,13 @@ def term_energies(field: Any, coef: np.ndarray, labels: np.ndarray,
     Pixel form ``|y_p - (L(T_2p) + L(T_2p+1)) / 2| / sigma_b`` (4.12), triplet form
     ``|y_c - L(c)| / sigma_b`` (4.20). With ``memo`` (one coefficient row, equal to
     ``coef``) radiances come from it; otherwise each labelling's geometry is computed
-    once and its radiance once per coefficient row.
+    once (:data:`BATCH_TRIANGLES` triangles at a time) and its radiance once per
+    coefficient row.
     """
-    tri, M = field.tri, labels.shape[0]
-    n_tri = tri.shape[0]
     if memo is not None:
         return data_terms(field, memo.radiance(field, labels)[None])
-    rad = np.empty((coef.shape[0], M, n_tri))
-    step = max(1, BATCH_TRIANGLES // n_tri)
-    for a in range(0, M, step):
-        lab = labels[a:a + step]
-        nodes = np.broadcast_to(tri, (lab.shape[0], *tri.shape)).reshape(-1, 3)
-        rad[:, a:a + step] = _render(field, coef, nodes, lab[:, tri].reshape(-1, 3)
-                                     ).reshape(coef.shape[0], lab.shape[0], n_tri)
-    return data_terms(field, rad)
+    rad = _render(field, coef, *_triangles(field, labels))
+    return data_terms(field, rad.reshape(coef.shape[0], labels.shape[0], -1))
 
 
 def data_terms(field: Any, rad: np.ndarray) -> np.ndarray:
@@ -163,10 +178,4 @@ def draw_features(field: Any, labels: np.ndarray) -> np.ndarray:
     coefficient rows, so energies of fixed labellings at many parameter vectors cost
     one exponential per triangle and vector.
     """
-    tri = field.tri
-    out = np.empty((labels.shape[0], tri.shape[0], 5))
-    for k, lab in enumerate(labels):
-        for a in range(0, tri.shape[0], BATCH_TRIANGLES):
-            sl = slice(a, a + BATCH_TRIANGLES)
-            out[k, sl] = _features(field, tri[sl], lab[tri[sl]])
-    return out
+    return _batched_features(field, *_triangles(field, labels)).reshape(labels.shape[0], -1, 5)

@@ -54,6 +54,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import xarray as xr
@@ -127,22 +128,35 @@ MATERIALS = {
 }
 
 
+def specimen_scene(config: dict, seed: int,
+                   shape: tuple[int, int] | None = None) -> tuple[Any, np.ndarray, float]:
+    """A specimen's scene, true parameters (unit cube) and pixel-noise sd, from its trial
+    config (``brdf``, ``material``, ``specimen`` and the study's settings) and trial seed;
+    ``shape`` overrides the config's image size (same surface law, light and noise level)."""
+    import mrfpe
+
+    brdf, material, specimen = config["brdf"], config["material"], config["specimen"]
+    model = mrfpe.brdf.get(brdf)
+    u = np.asarray(config["materials"][brdf][material], dtype=float)
+    kw = dict(brdf=brdf, theta=model.to_natural(u),
+              shape=tuple(config["shape"] if shape is None else shape),
+              n_labels=config["n_labels"], surface=config["surface"],
+              seed=child_seeds(seed, 3)[0])
+    clean = mrfpe.synthetic.make_scene(**kw)  # same seed: same surface and light, no noise
+    noise = config["noise_levels"][specimen % len(config["noise_levels"])] * float(
+        np.percentile(clean.image, 99))
+    scene = mrfpe.synthetic.make_scene(**kw, noise=noise) if noise > 0 else clean
+    return scene, u, noise
+
+
 def trial(config: dict, repeat: int, seed: int) -> xr.Dataset:
     """One specimen: scene, target, and its unevolved, evolved and LM feature sets."""
     import mrfpe
     from mrfpe.posterior import normalise_log_weights
     from mrfpe.samplers.kit import grid
 
-    brdf, material, specimen = config["brdf"], config["material"], config["specimen"]
-    s_scene, s_pmc, s_lm = child_seeds(seed, 3)
-    model = mrfpe.brdf.get(brdf)
-    u = np.asarray(config["materials"][brdf][material], dtype=float)
-    kw = dict(brdf=brdf, theta=model.to_natural(u), shape=tuple(config["shape"]),
-              n_labels=config["n_labels"], surface=config["surface"], seed=s_scene)
-    clean = mrfpe.synthetic.make_scene(**kw)  # same seed: same surface and light, no noise
-    noise = config["noise_levels"][specimen % len(config["noise_levels"])] * float(
-        np.percentile(clean.image, 99))
-    scene = mrfpe.synthetic.make_scene(**kw, noise=noise) if noise > 0 else clean
+    _, s_pmc, s_lm = child_seeds(seed, 3)
+    scene, u, noise = specimen_scene(config, seed)
     target = mrfpe.targets.get(config["target"], scene, **config["target_options"])
     evolved = mrfpe.sample("pmc", target, seed=s_pmc, **config["pmc"])
     pts = grid(np.asarray(target.bounds, dtype=float), config["grid_samples"])
@@ -163,8 +177,8 @@ def trial(config: dict, repeat: int, seed: int) -> xr.Dataset:
         coords={"param": list(target.param_names)})
 
 
-def _posterior(theta: np.ndarray, log_weight: np.ndarray, names: list,
-               map_theta: np.ndarray | None = None) -> xr.Dataset:
+def posterior_set(theta: np.ndarray, log_weight: np.ndarray, names: list,
+                  map_theta: np.ndarray | None = None) -> xr.Dataset:
     """A minimal posterior Dataset (what the distances read)."""
     if map_theta is None:
         map_theta = theta[int(np.argmax(log_weight))]
@@ -193,13 +207,13 @@ def _grid_set(ds: xr.Dataset, power: float) -> xr.Dataset:
     from mrfpe.posterior import normalise_log_weights
 
     lw = normalise_log_weights(power * ds["grid_log_weight"].values)
-    return _posterior(ds["grid_theta"].values, lw, [str(p) for p in ds["param"].values])
+    return posterior_set(ds["grid_theta"].values, lw, [str(p) for p in ds["param"].values])
 
 
 def _evolved_set(ds: xr.Dataset, uniform: bool) -> xr.Dataset:
     """A specimen's final PMC cloud, equally weighted or with the sampler's weights."""
     lw = ds["evolved_log_weight"].values
-    return _posterior(ds["evolved_theta"].values, np.zeros_like(lw) if uniform else lw,
+    return posterior_set(ds["evolved_theta"].values, np.zeros_like(lw) if uniform else lw,
                       [str(p) for p in ds["param"].values], ds["evolved_map"].values)
 
 

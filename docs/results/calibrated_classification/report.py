@@ -21,6 +21,7 @@ import numpy as np
 import xarray as xr
 
 from mrfpe.classify import error_stats, knn_accuracy, similarity_matrix
+from mrfpe.experiments.classification import posterior_set
 from mrfpe.experiments.writeup import markdown_table, write_report
 from mrfpe.posterior import ess, weighted_cov
 from mrfpe.resampling import resample
@@ -38,11 +39,8 @@ COLUMNS = [("chernoff", "chernoff", {"alpha": 0.7}), ("bhattacharyya", "bhattach
 
 
 def posterior(ds: xr.Dataset, prefix: str) -> xr.Dataset:
-    names = [str(p) for p in ds["param"].values]
-    return xr.Dataset({"theta": (("sample", "param"), ds[f"{prefix}_theta"].values),
-                       "log_weight": (("sample",), ds[f"{prefix}_log_weight"].values),
-                       "map_theta": (("step", "param"), ds[f"{prefix}_map"].values[None])},
-                      coords={"param": names})
+    return posterior_set(ds[f"{prefix}_theta"].values, ds[f"{prefix}_log_weight"].values,
+                         [str(p) for p in ds["param"].values], ds[f"{prefix}_map"].values)
 
 
 def feature_set(ds: xr.Dataset, prefix: str) -> xr.Dataset:
@@ -59,10 +57,8 @@ def gaussian_set(ds: xr.Dataset, which: str) -> xr.Dataset:
     cov = np.linalg.inv(ds["pl_hessian" if which == "pl" else "fisher_information"].values)
     centre = ds["theta_mple" if which == "pl" else "theta_adjusted"].values
     z = np.random.default_rng(0).standard_normal((SET_SIZE, centre.size))
-    theta = centre + z @ np.linalg.cholesky(cov).T
-    return xr.Dataset({"theta": (("sample", "param"), theta),
-                       "log_weight": (("sample",), np.zeros(SET_SIZE)),
-                       "map_theta": (("step", "param"), centre[None])}, coords={"param": names})
+    return posterior_set(centre + z @ np.linalg.cholesky(cov).T, np.zeros(SET_SIZE), names,
+                         centre)
 
 
 def load() -> list[xr.Dataset]:

@@ -1,8 +1,9 @@
 """The classification benchmark's specimens with calibrated posteriors beside exp(PL_s)'s.
 
 For every specimen of ``../classification`` (12 materials x 4 specimens per BRDF model,
-20 labels; the scene built as :func:`mrfpe.experiments.classification.trial` builds it,
-from the committed trial file's seed, but at :data:`SHAPE` pixels) this computes
+20 labels; the scene built by :func:`mrfpe.experiments.classification.specimen_scene` from
+the committed trial file's seed, as the study builds it, but at :data:`SHAPE` pixels) this
+computes
 
 * ``pl``        PMC (:data:`PMC`) on the study's target ``pls`` (7.5-7.7): the
                 pseudo-posterior exp(PL_s) itself, untempered;
@@ -41,7 +42,7 @@ import numpy as np
 import xarray as xr
 
 import mrfpe
-from mrfpe.experiments.problems import child_seeds
+from mrfpe.experiments.classification import specimen_scene
 from mrfpe.netcdf import write_atomic
 
 HERE = Path(__file__).resolve().parent
@@ -68,21 +69,6 @@ def specimens(config: dict) -> list[tuple[dict, int]]:
     return sorted(out, key=lambda cs: (cs[0]["specimen"], cs[0]["material"], cs[0]["brdf"]))
 
 
-def scene_of(config: dict, cell: dict, seed: int):
-    """The specimen's scene (at :data:`SHAPE`) and truth, built as the classification study does."""
-    brdf, material, specimen = cell["brdf"], cell["material"], cell["specimen"]
-    s_scene = child_seeds(seed, 3)[0]
-    model = mrfpe.brdf.get(brdf)
-    u = np.asarray(config["materials"][brdf][material], dtype=float)
-    kw = dict(brdf=brdf, theta=model.to_natural(u), shape=SHAPE,
-              n_labels=config["n_labels"], surface=config["surface"], seed=s_scene)
-    clean = mrfpe.synthetic.make_scene(**kw)
-    noise = config["noise_levels"][specimen % len(config["noise_levels"])] * float(
-        np.percentile(clean.image, 99))
-    scene = mrfpe.synthetic.make_scene(**kw, noise=noise) if noise > 0 else clean
-    return scene, u
-
-
 def cloud(post: xr.Dataset, prefix: str) -> dict:
     """A PMC posterior's final cloud and diagnostics as Dataset variables/attributes."""
     return {f"{prefix}_theta": (("sample", "param"), post["theta"].values),
@@ -93,7 +79,7 @@ def cloud(post: xr.Dataset, prefix: str) -> dict:
 
 
 def run_one(config: dict, cell: dict, seed: int) -> xr.Dataset:
-    scene, u = scene_of(config, cell, seed)
+    scene, u, _ = specimen_scene({**config, **cell}, seed, shape=SHAPE)
     s_pl, s_adj, s_cal = (int(s) for s in np.random.SeedSequence([seed, 7]).generate_state(3))
     pl = mrfpe.targets.get(config["target"], scene, **config["target_options"])
     data = cloud(mrfpe.sample("pmc", pl, seed=s_pl, **PMC), "pl")

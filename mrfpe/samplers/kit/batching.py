@@ -89,8 +89,9 @@ def map_batched(task: Callable[[T, Callable[[np.ndarray], Any]], R], items: Iter
     Yields
     ------
     Each task's result, in the order of ``items``, as soon as it and the earlier
-    ones are done. A task's exception is raised here in its turn; no task starts
-    after that, and the running ones end first.
+    ones are done. A task's exception is raised here in its turn, after the
+    earlier results; no task starts once one has failed (or the consumer has
+    stopped), and the running ones end first.
     """
     items = list(items)
     n = max(1, min(int(n_threads), len(items)))
@@ -113,6 +114,7 @@ def map_batched(task: Callable[[T, Callable[[np.ndarray], Any]], R], items: Iter
                     results[i] = task(items[i], gather)
                 except BaseException as exc:  # raised in order by the consumer
                     errors[i] = exc
+                    stop.set()  # items are taken in order: every earlier one has started
                 finally:
                     done[i].set()
         finally:

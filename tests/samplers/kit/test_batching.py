@@ -55,7 +55,9 @@ def test_a_task_error_is_raised_in_its_turn_and_stops_new_tasks():
     assert [next(gen), next(gen)] == [0, 1]
     with pytest.raises(ValueError, match="task 2 failed"):
         next(gen)
-    assert len(started) < 40  # no task starts after the consumer stopped
+    # No task starts once task 2 failed: the other two clients wait in the gather
+    # for it until it has recorded the failure, so at most one more each starts.
+    assert sorted(started)[:3] == [0, 1, 2] and len(started) <= 5
 
 
 def test_a_failing_batch_reaches_every_waiting_task():

@@ -31,6 +31,11 @@ the box's face, e.g. for a configuration of one state only, is refused) and a
 non-singular Fisher information (refused, naming the statistic that does not
 vary); and the draws must come from a chain that has mixed (their number, burn-in
 and thinning follow the measured autocorrelation time, :mod:`mrfpe.models.mixing`).
+The PL posterior's spread is taken from its moments, not from its curvature at the
+MPLE, which a kinked log PL (a BRDF scene's absolute-difference data terms) makes far
+too large (:mod:`mrfpe.models.pl_spread`). It keeps exp(PL)'s far modes: a second mode
+the moments' importance sampler did not meet is mapped along, not calibrated (sample
+the adjusted target with PMC and compare its cloud with the moments it promises).
 """
 
 from __future__ import annotations
@@ -44,6 +49,7 @@ from scipy.optimize import minimize
 from scipy.special import logsumexp
 
 from mrfpe.models.mixing import autocorrelation_time
+from mrfpe.models.pl_spread import hessian, pl_moments, start_covariance
 from mrfpe.targets.base import Target, as_theta_batch
 from mrfpe.targets.maximise import maximise
 
@@ -256,26 +262,6 @@ def _argmin_whitened(f: Any, theta: np.ndarray, info: np.ndarray) -> np.ndarray:
     return to_theta(res.x)
 
 
-def hessian(f: Any, theta: np.ndarray, h: np.ndarray) -> np.ndarray:
-    """Central-difference Hessian of a batched scalar function at ``theta``."""
-    d = theta.size
-    E = np.diag(h)
-    pts = [theta]
-    for i in range(d):
-        for j in range(d):
-            pts += [theta + E[i] + E[j], theta + E[i] - E[j], theta - E[i] + E[j],
-                    theta - E[i] - E[j]]
-    v = f(np.array(pts))
-    H = np.empty((d, d))
-    k = 1
-    for i in range(d):
-        for j in range(d):
-            a, b_, c, e = v[k:k + 4]
-            H[i, j] = (a - b_ - c + e) / (4 * h[i] * h[j])
-            k += 4
-    return 0.5 * (H + H.T)
-
-
 class AdjustedPL(Target):
     """The mode- and curvature-adjusted pseudolikelihood (see the module docstring).
 
@@ -308,6 +294,15 @@ class AdjustedPL(Target):
         (:func:`simulate_draws`); it is at least 50 τ long whatever this says.
     seed : int
         Every simulation flows from it.
+
+    Attributes
+    ----------
+    theta_pl, theta_ml : the MPLE and the adjusted target's centre.
+    pl_covariance : exp(PL)'s covariance (:func:`mrfpe.models.pl_spread.pl_moments`); its
+        sds are the PL posterior's spread in the face test and the Monte Carlo MLE's step
+        limit. ``pl_hessian`` (the curvature at the MPLE) is only its importance sampler's
+        start: a BRDF scene's log PL is kinked, and its curvature is not its spread.
+    fisher_information, W, mle : the calibration.
     """
 
     data_kind = "configurations"
@@ -328,39 +323,43 @@ class AdjustedPL(Target):
         self.mle = None
         b = self.bounds
         # a grid of at most ~4096 points whatever the dimension, then the local polish
-        theta_pl, _ = maximise(pl, grid=max(3, int(4096 ** (1 / b.shape[0]))), seed=seed)
-        H = -hessian(pl._log_prob, theta_pl, _step(pl, theta_pl))
-        if not np.all(np.isfinite(H)):
-            raise ValueError(f"the PL's Hessian at the MPLE {theta_pl.round(4).tolist()} is not "
-                             f"finite: the MPLE is at the edge of the model's valid region")
-        dist = np.minimum(theta_pl - b[:, 0], b[:, 1] - theta_pl)
+        theta_pl, lp_pl = maximise(pl, grid=max(3, int(4096 ** (1 / b.shape[0]))), seed=seed)
+        self._check_interior(theta_pl, np.zeros(b.shape[0]))
+        H = self._curvature(theta_pl)
+        rng = np.random.default_rng(seed)
+        s_mle = int(rng.integers(2**63))
         try:
-            m_chol = np.linalg.cholesky(H).T  # H = MᵀM
-            sd = np.sqrt(np.diag(np.linalg.inv(H)))
-        except np.linalg.LinAlgError:  # no sd: only the face itself can be tested
-            m_chol, sd = None, np.zeros(b.shape[0])
-        edge = (dist < 1e-6 * (b[:, 1] - b[:, 0])) | (dist < sd)
-        if edge.any():
-            raise ValueError(f"the MPLE lies on (or within one PL sd of) the bounds' face for "
-                             f"{[self.param_names[i] for i in np.flatnonzero(edge)]} "
-                             f"(theta {theta_pl.round(4).tolist()}): the adjustment needs an "
-                             f"interior mode (widen the bounds, or the data carry no "
-                             f"information on these parameters)")
-        if m_chol is None:
+            mom = pl_moments(pl, theta_pl, start_covariance(H, b), rng)
+        except ValueError as err:
+            if align == "moments":
+                raise ValueError(f"{err}: exp(PL) is far from one Gaussian (a curved ridge "
+                                 f"or several modes), which the moment alignment cannot map; "
+                                 f"align='mode' calibrates the curvature at the MPLE only, and "
+                                 f"PMC on exp(PL) shows its shape") from None
+            mom = None
+        if mom is not None and mom.best_log_prob > lp_pl + 1e-3:  # the maximiser stopped short
+            theta_pl, lp_pl = maximise(pl, grid=np.stack([theta_pl, mom.best_theta]), n_starts=2)
+            H = self._curvature(theta_pl)
+        m_chol = _cholesky_or_none(H)
+        if align == "mode" and m_chol is None:
             raise ValueError(f"the PL's Hessian is not negative definite at the MPLE "
                              f"{theta_pl.round(4).tolist()} (eigenvalues of its negative "
-                             f"{np.linalg.eigvalsh(H).round(3).tolist()}): a saddle where the "
-                             f"maximiser stopped (a negative eigenvalue) or a ridge of "
-                             f"{list(self.param_names)} the data do not identify (a zero one)")
-        rng = np.random.default_rng(seed)
+                             f"{np.linalg.eigvalsh(H).round(3).tolist()}), which align='mode' "
+                             f"needs: a saddle where the maximiser stopped (a negative "
+                             f"eigenvalue), a ridge of {list(self.param_names)} the data do "
+                             f"not identify (a zero one), or a kinked PL (use align='moments')")
+        # the PL posterior's spread: its moments where they could be estimated (a kinked
+        # log PL's curvature is not its spread, mrfpe.models.pl_spread), else the curvature
+        pl_cov = mom.covariance if mom is not None else np.linalg.inv(H)
+        self._check_interior(theta_pl, np.sqrt(np.diag(pl_cov)))
         if mode == "mcmc_mle":
-            res = mcmc_mle(lik, theta_pl, n_draws=n_draws, seed=int(rng.integers(2**63)),
-                           metric=H, max_iter=max_rounds, pilot_sweeps=pilot_sweeps)
+            res = mcmc_mle(lik, theta_pl, n_draws=n_draws, seed=s_mle,
+                           metric=np.linalg.inv(pl_cov), max_iter=max_rounds,
+                           pilot_sweeps=pilot_sweeps)
             theta_ml, info, sims = res.theta, np.linalg.inv(res.covariance), res.n_simulations
             self.mle = res
         else:
-            draws = simulate_draws(lik, theta_pl, n_draws, seed=int(rng.integers(2**63)),
-                                   pilot_sweeps=pilot_sweeps)
+            draws = simulate_draws(lik, theta_pl, n_draws, seed=s_mle, pilot_sweeps=pilot_sweeps)
             info, sims = fisher_information(lik, draws), draws.n_sweeps
             theta_ml = theta_pl
         l_info = np.linalg.cholesky(info)  # I = L_I L_Iᵀ
@@ -368,14 +367,35 @@ class AdjustedPL(Target):
             self.centre = theta_pl
             self.W = np.linalg.solve(m_chol, l_info.T)
         else:  # A⁻¹ C A⁻ᵀ = I⁻¹: the covariance is the inverse Fisher information
-            self.centre, cov = _pl_moments(pl, theta_pl, H, rng)
-            self.W = np.linalg.cholesky(cov) @ l_info.T
+            self.centre = mom.mean
+            self.W = np.linalg.cholesky(pl_cov) @ l_info.T
             if self.mle is not None:  # mean = MLE + the likelihood's skew (Laplace expansion)
                 theta_ml = theta_ml + _skew_shift(lik, self.mle.draws, info)
         self.theta_pl, self.theta_ml = theta_pl, theta_ml
-        self.fisher_information, self.pl_hessian = info, H
+        self.fisher_information, self.pl_hessian, self.pl_covariance = info, H, pl_cov
         self.n_simulation_sweeps = int(sims)
         self._offset = float(pl._log_prob(theta_pl[None])[0])
+
+    def _check_interior(self, theta_pl: np.ndarray, sd: np.ndarray) -> None:
+        """Refuse an MPLE on the box's face or within one PL sd of it."""
+        b = self.bounds
+        dist = np.minimum(theta_pl - b[:, 0], b[:, 1] - theta_pl)
+        edge = (dist < 1e-6 * (b[:, 1] - b[:, 0])) | (dist < sd)
+        if edge.any():
+            raise ValueError(f"the MPLE lies on (or within one PL sd of) the bounds' face for "
+                             f"{[self.param_names[i] for i in np.flatnonzero(edge)]} "
+                             f"(theta {theta_pl.round(4).tolist()}, PL sd "
+                             f"{sd.round(4).tolist()}): the adjustment needs an interior mode "
+                             f"(widen the bounds, or the data carry no information on these "
+                             f"parameters)")
+
+    def _curvature(self, theta_pl: np.ndarray) -> np.ndarray:
+        """The PL's negative Hessian at the MPLE (refused where it is not finite)."""
+        H = -hessian(self.pl._log_prob, theta_pl, _step(self.pl, theta_pl))
+        if not np.all(np.isfinite(H)):
+            raise ValueError(f"the PL's Hessian at the MPLE {theta_pl.round(4).tolist()} is not "
+                             f"finite: the MPLE is at the edge of the model's valid region")
+        return H
 
     def to_pl(self, theta: Any) -> np.ndarray:
         """The PL's argument for adjusted parameters: ``c + W (θ - θ_ML)``.
@@ -413,38 +433,9 @@ def _skew_shift(lik: Any, draws: Draws, info: np.ndarray) -> np.ndarray:
     return -0.5 * M * sigma @ np.einsum("jkl,kl->j", kappa, sigma)
 
 
-def _pl_moments(pl: Any, theta_pl: np.ndarray, H: np.ndarray, rng: np.random.Generator,
-                n: int = 8192, rounds: int = 4, max_rounds: int = 10) -> tuple[np.ndarray,
-                                                                             np.ndarray]:
-    """Mean and covariance of exp(PL) on the box by adaptive importance sampling.
-
-    Gaussian proposals, 1.5x wider than the current estimate, start at the
-    Laplace approximation ``N(θ_PL, H⁻¹)`` and follow the weighted moments
-    (Cappé et al. 2004's adaptation, one component) for ``rounds`` rounds, and on
-    while the importance ESS stays below ``n / 10`` (a skewed or curved exp(PL)),
-    up to ``max_rounds``. The last round's moments are refused if its ESS is below
-    ``max(50 d, n / 40)``.
-    """
-    mean, cov = theta_pl.copy(), np.linalg.inv(H)
-    d = theta_pl.size
-    for k in range(max_rounds):
-        try:
-            chol = 1.5 * np.linalg.cholesky(cov)
-        except np.linalg.LinAlgError:
-            raise ValueError("the pseudo-posterior's covariance is not positive definite (its "
-                             "importance sample collapsed); use align='mode'") from None
-        z = rng.standard_normal((n, d))
-        th = mean + z @ chol.T
-        log_q = -0.5 * np.sum(z**2, axis=1) - np.log(np.diag(chol)).sum()
-        lw = pl.log_prob(th) - log_q
-        w = np.exp(lw - lw.max())
-        w /= w.sum()
-        ess = 1.0 / np.sum(w**2)
-        mean = w @ th
-        cov = (th - mean).T @ ((th - mean) * w[:, None])
-        if k + 1 >= rounds and ess >= n / 10:
-            break
-    if not ess >= max(50 * d, n / 40):
-        raise ValueError(f"the pseudo-posterior's moments could not be estimated (importance "
-                         f"ESS {ess:.0f} of {n} after {k + 1} rounds); use align='mode'")
-    return mean, cov
+def _cholesky_or_none(H: np.ndarray) -> np.ndarray | None:
+    """``M`` with ``H = MᵀM``, or None where ``H`` is not positive definite."""
+    try:
+        return np.linalg.cholesky(H).T
+    except np.linalg.LinAlgError:
+        return None

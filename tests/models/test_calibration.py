@@ -83,6 +83,8 @@ class _Ridge(Target):
 def test_a_ridge_is_named_as_a_ridge_not_as_a_face(ising):
     _m, _x, _exact, lik, _pl = ising
     with pytest.raises(ValueError, match=r"not negative definite.*saddle.*ridge"):
+        AdjustedPL(_Ridge(), lik, align="mode")  # the mode alignment needs the curvature
+    with pytest.raises(ValueError, match=r"face for \['b'\]"):  # the moments see b's spread
         AdjustedPL(_Ridge(), lik)
 
 

@@ -102,7 +102,8 @@ def run_one(config: dict, cell: dict, seed: int) -> xr.Dataset:
         data.update({
             "theta_mple": (("param",), adj.theta_pl), "theta_adjusted": (("param",), adj.theta_ml),
             "W": (d2, adj.W), "fisher_information": (d2, adj.fisher_information),
-            "pl_hessian": (d2, adj.pl_hessian), "build_time_s": ((), build_s),
+            "pl_hessian": (d2, adj.pl_hessian), "pl_mean": (("param",), adj.centre),
+            "pl_covariance": (d2, adj.pl_covariance), "build_time_s": ((), build_s),
             "simulation_sweeps": ((), adj.n_simulation_sweeps),
             "tau": ((), mle.draws.tau), "mle_rounds": ((), mle.n_iterations),
             "mle_converged": ((), mle.converged)})
@@ -114,16 +115,17 @@ def run_one(config: dict, cell: dict, seed: int) -> xr.Dataset:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--shard", nargs=2, type=int, default=(0, 1), metavar=("K", "N"))
+    ap.add_argument("--trials", type=Path, default=TRIALS, help="where the trial files go")
     ap.add_argument("--limit", type=int, default=None, help="at most this many specimens")
     ap.add_argument("--reverse", action="store_true",
                     help="take the shard from its end (a second process on an unfinished shard)")
     args = ap.parse_args()
     config = json.loads((SOURCE / "config.json").read_text())["config"]
-    TRIALS.mkdir(exist_ok=True)
+    args.trials.mkdir(exist_ok=True)
     todo = specimens(config)[args.shard[0]::args.shard[1]]
     todo = (todo[::-1] if args.reverse else todo)[:args.limit]
     for cell, seed in todo:
-        path = TRIALS / ("brdf={brdf},material={material},specimen={specimen}.nc".format(**cell))
+        path = args.trials / "brdf={brdf},material={material},specimen={specimen}.nc".format(**cell)
         if path.exists():
             continue
         t0 = time.perf_counter()

@@ -1,0 +1,120 @@
+"""The spread of a pseudo-posterior exp(PL): its curvature at the mode, and its moments.
+
+:class:`~mrfpe.models.calibration.AdjustedPL` maps exp(PL)'s centre and spread onto
+the likelihood's. The curvature at the MPLE (:func:`hessian`) describes the spread
+only where log PL is smooth and close to quadratic over a posterior sd. A BRDF
+scene's is not: its data terms are absolute differences ``|y - L(θ)| / σ_b``
+(thesis 4.12, 4.20), so log PL has a kink wherever a pixel's rendered radiance
+crosses its observation, and a central difference a ten-thousandth of the range
+wide measures those kinks. On the 87 scenes of 50 x 50 pixels where it was
+measured the Laplace sd ``sqrt(diag(H⁻¹))`` was a median 6 (Ward) and 25 (Phong)
+times narrower than exp(PL)'s own (PMC's weighted sd, which agreed with
+:func:`pl_moments` to a median ratio of 1.0), and on two scenes ``H`` was not
+even negative definite. So the spread is estimated from exp(PL)'s moments
+(:func:`pl_moments`), with the curvature as the importance sampler's start.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+__all__ = ["PLMoments", "hessian", "pl_moments", "start_covariance"]
+
+
+def hessian(f: Any, theta: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """Central-difference Hessian of a batched scalar function at ``theta``."""
+    d = theta.size
+    E = np.diag(h)
+    pts = [theta]
+    for i in range(d):
+        for j in range(d):
+            pts += [theta + E[i] + E[j], theta + E[i] - E[j], theta - E[i] + E[j],
+                    theta - E[i] - E[j]]
+    v = f(np.array(pts))
+    H = np.empty((d, d))
+    k = 1
+    for i in range(d):
+        for j in range(d):
+            a, b_, c, e = v[k:k + 4]
+            H[i, j] = (a - b_ - c + e) / (4 * h[i] * h[j])
+            k += 4
+    return 0.5 * (H + H.T)
+
+
+def start_covariance(neg_hessian: np.ndarray, bounds: np.ndarray) -> np.ndarray:
+    """A proposal covariance from the negative Hessian at the mode: its inverse, with
+    every eigenvalue taken by magnitude and at least 16 in coordinates scaled by the box
+    (no sd above a quarter of the range), so that a flat, indefinite or kinked curvature
+    still gives a proposal the importance sampler can adapt from."""
+    D = np.diag(bounds[:, 1] - bounds[:, 0])
+    vals, vecs = np.linalg.eigh(D @ neg_hessian @ D)
+    vals = np.maximum(np.abs(np.nan_to_num(vals)), 16.0)
+    return D @ (vecs / vals) @ vecs.T @ D
+
+
+@dataclass(frozen=True)
+class PLMoments:
+    """exp(PL)'s mean and covariance on the box, the importance ESS of the last round,
+    and the highest-PL point the sampler met (a better maximum than the start's, if any)."""
+
+    mean: np.ndarray
+    covariance: np.ndarray
+    ess: float
+    rounds: int
+    best_theta: np.ndarray
+    best_log_prob: float
+
+    @property
+    def sd(self) -> np.ndarray:
+        return np.sqrt(np.diag(self.covariance))
+
+
+def pl_moments(pl: Any, theta: np.ndarray, cov0: np.ndarray, rng: np.random.Generator,
+               n: int = 8192, rounds: int = 4, max_rounds: int = 10) -> PLMoments:
+    """Mean and covariance of exp(PL) on the box by adaptive importance sampling.
+
+    Gaussian proposals, 1.5x wider than the current estimate, start at ``N(theta,
+    cov0)`` (the Laplace approximation, :func:`start_covariance`) and follow the
+    weighted moments (Cappé et al. 2004's adaptation, one component; a proposal
+    whose ESS is below 10 d is widened fourfold in variance instead) for ``rounds``
+    rounds, and on while the importance ESS stays below ``n / 10`` (a skewed or
+    curved exp(PL)), up to ``max_rounds``. The last round's moments are refused
+    (``ValueError``) if its ESS is below ``max(50 d, n / 40)``.
+    """
+    mean, cov = np.array(theta, dtype=np.float64), np.array(cov0, dtype=np.float64)
+    d = mean.size
+    best, best_lp = mean.copy(), -np.inf
+    for k in range(max_rounds):
+        try:
+            chol = 1.5 * np.linalg.cholesky(cov)
+        except np.linalg.LinAlgError:
+            raise ValueError("the pseudo-posterior's covariance is not positive definite (its "
+                             "importance sample collapsed)") from None
+        z = rng.standard_normal((n, d))
+        th = mean + z @ chol.T
+        log_q = -0.5 * np.sum(z**2, axis=1) - np.log(np.diag(chol)).sum()
+        lp = pl.log_prob(th)
+        top = int(np.argmax(lp))
+        if lp[top] > best_lp:
+            best, best_lp = th[top].copy(), float(lp[top])
+        lw = lp - log_q
+        if not np.isfinite(lw.max()):
+            raise ValueError(f"the pseudo-posterior's moments could not be estimated: no "
+                             f"importance draw has a finite PL (round {k + 1})")
+        w = np.exp(lw - lw.max())
+        w /= w.sum()
+        ess = 1.0 / np.sum(w**2)
+        mean = w @ th
+        if ess >= 10 * d:
+            cov = (th - mean).T @ ((th - mean) * w[:, None])
+        else:  # a few draws carry the weight: their covariance would collapse; widen instead
+            cov = 4.0 * cov
+        if k + 1 >= rounds and ess >= n / 10:
+            break
+    if not ess >= max(50 * d, n / 40):
+        raise ValueError(f"the pseudo-posterior's moments could not be estimated (importance "
+                         f"ESS {ess:.0f} of {n} after {k + 1} rounds)")
+    return PLMoments(mean, cov, float(ess), k + 1, best, best_lp)

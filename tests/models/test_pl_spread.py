@@ -1,0 +1,100 @@
+"""exp(PL)'s spread: importance-sampled moments against quadrature, and a kinked log PL
+whose curvature at the mode is not its spread."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mrfpe.models.pl_spread import hessian, pl_moments, start_covariance
+from mrfpe.targets.base import Target
+
+BOX = np.array([[0.0, 1.0], [0.0, 1.0]])
+
+
+class _Fn(Target):
+    param_names = ("a", "b")
+    bounds = BOX
+
+    def __init__(self, f):
+        self.f = f
+
+    def _log_prob(self, theta):
+        return self.f(theta[:, 0], theta[:, 1])
+
+
+def _quadrature(f, n=601):
+    g = np.linspace(0.0, 1.0, n)
+    A, B = np.meshgrid(g, g, indexing="ij")
+    lp = f(A.ravel(), B.ravel())
+    w = np.exp(lp - lp.max())
+    w /= w.sum()
+    X = np.stack([A.ravel(), B.ravel()], 1)
+    mean = w @ X
+    return mean, (X - mean).T @ ((X - mean) * w[:, None])
+
+
+def _gaussian(a, b):
+    za, zb = (a - 0.45) / 0.03, (b - 0.6) / 0.05
+    return -0.5 * (za**2 - 1.2 * za * zb + zb**2) / (1 - 0.36)
+
+
+# A kinked log PL: a sum of absolute differences, as a BRDF scene's data terms are.
+_CENTRES = np.random.default_rng(3).normal(0.0, 1.0, 400)
+
+
+def _kinked(a, b):
+    return (-np.abs((a[:, None] - 0.5) * 30 - _CENTRES).sum(axis=1) / 8
+            - np.abs((b[:, None] - 0.4) * 20 - _CENTRES).sum(axis=1) / 8)
+
+
+@pytest.mark.parametrize("f", [_gaussian, _kinked], ids=["gaussian", "kinked"])
+def test_moments_match_quadrature_from_a_start_ten_times_too_narrow(f):
+    mean, cov = _quadrature(f)
+    sd = np.sqrt(np.diag(cov))
+    mom = pl_moments(_Fn(f), mean, np.diag((sd / 10) ** 2), np.random.default_rng(0))
+    np.testing.assert_allclose(mom.mean, mean, atol=0.05 * sd.min())
+    np.testing.assert_allclose(mom.sd, sd, rtol=0.05)
+    assert mom.ess >= 8192 / 10
+
+
+def test_a_kinked_log_pl_curvature_is_not_its_spread():
+    """The situation pl_spread exists for: the Laplace sd from a central difference is
+    far off the posterior sd, while the moments recover it."""
+    mean, cov = _quadrature(_kinked)
+    target = _Fn(_kinked)
+    top = mean + np.array([1e-5, -2e-5])
+    H = -hessian(target._log_prob, top, np.full(2, 1e-4))
+    sd = np.sqrt(np.diag(cov))
+    if np.all(np.linalg.eigvalsh(H) > 0):  # a kink in the stencil: far too curved
+        laplace = np.sqrt(np.diag(np.linalg.inv(H)))
+        assert np.max(np.abs(np.log(laplace / sd))) > np.log(2)
+    # else no kink in the stencil: no curvature at all, no Laplace approximation
+    mom = pl_moments(target, top, start_covariance(H, BOX), np.random.default_rng(1))
+    np.testing.assert_allclose(mom.sd, sd, rtol=0.05)
+
+
+def test_the_best_point_met_reveals_a_higher_mode():
+    def spiked(a, b):
+        spike = 4.0 * np.exp(-((a - 0.47) ** 2 + (b - 0.6) ** 2) / (2 * 0.001**2))  # 4 % mass
+        return _gaussian(a, b) + spike
+
+    mom = pl_moments(_Fn(spiked), np.array([0.45, 0.6]), np.diag([0.03, 0.05]) ** 2,
+                     np.random.default_rng(2))
+    assert mom.best_log_prob > 1.0  # the Gaussian part peaks at 0
+    np.testing.assert_allclose(mom.best_theta, [0.47, 0.6], atol=0.003)
+
+
+def test_start_covariance_inverts_a_definite_curvature_and_bounds_the_others():
+    H = np.array([[400.0, 50.0], [50.0, 900.0]])
+    np.testing.assert_allclose(start_covariance(H, BOX), np.linalg.inv(H))
+    for bad in ([[1e6, 0.0], [0.0, -3.0]], [[266.0, 0.0], [0.0, 3.6e-7]]):  # indefinite, flat
+        cov = start_covariance(np.array(bad), BOX)
+        np.linalg.cholesky(cov)
+        assert np.all(np.sqrt(np.diag(cov)) <= 0.25 + 1e-12)
+
+
+def test_no_finite_draw_is_an_error_not_a_number():
+    with pytest.raises(ValueError, match="no importance draw has a finite PL"):
+        pl_moments(_Fn(lambda a, b: np.full(a.shape, -np.inf)), np.array([0.5, 0.5]),
+                   np.eye(2) * 1e-4, np.random.default_rng(0))

@@ -351,8 +351,15 @@ seeds). The adjusted-PL entries were last recomputed at commit aa18ef8, after th
 Carlo MLE's optimiser changed (Nelder–Mead in coordinates whitened by the Fisher
 information) and the moment alignment's importance sampler learned to adapt for more rounds
 when its ESS is low: mean |z| and sd ratios moved by at most 0.01–0.02 per case, and the
-90 % field intervals at the critical coupling now cover 11 of 20 (9 before). The page
-describes the library at aa18ef8.
+90 % field intervals at the critical coupling now cover 11 of 20 (9 before). They were
+recomputed once more at commit 18b745e, when the adjustment began to take exp(PL)'s spread
+(for its face test and the Monte Carlo MLE's step limit) from exp(PL)'s importance-sampled
+covariance instead of its curvature at the MPLE, which on a BRDF scene's kinked log PL is
+far too narrow (on these smooth Ising PLs the two nearly agree): mean |z| and sd ratios moved
+by at most 0.02 per case, the critical-coupling field intervals cover 12 of 20, and no PMC run
+on the adjusted PL flags itself unreliable (one did). That refresh shared the two cores with
+two other computations, so its wall times are several times a quiet machine's (compare the
+simulation sweeps, which did not change). The page describes the library at 18b745e.
 
 Wall times. The main pass ran as one process on a machine whose two cores were shared with
 other work (load average 4–7), the adjusted-PL refresh on a quieter machine (load about 2):

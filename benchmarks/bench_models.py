@@ -309,15 +309,9 @@ def posterior_costs(quick: bool = False) -> list[str]:
 
 def _label_sweeps(field, u, x, sweeps: int, memo: bool) -> np.ndarray:
     """``sweeps`` label sweeps from ``x``, with the radiance memo or rendering every triangle."""
-    from mrfpe.models import label_render
     from mrfpe.models.brdf_simulate import simulate_labels
 
-    old = label_render.MEMO_BUDGET_FRACTION
-    label_render.MEMO_BUDGET_FRACTION = old if memo else 0.0
-    try:
-        return simulate_labels(field, u, 1, n_sweeps=sweeps, seed=1, init=x)[0]
-    finally:
-        label_render.MEMO_BUDGET_FRACTION = old
+    return simulate_labels(field, u, 1, n_sweeps=sweeps, seed=1, init=x, memoise=memo)[0]
 
 
 def label_sweeps(quick: bool = False) -> list[str]:

@@ -381,7 +381,7 @@ def _start(field: LabelField, init: Any, rng: np.random.Generator) -> np.ndarray
 
 def simulate_labels(scene: Any, theta: Any, n: int = 1, *, n_sweeps: int = DEFAULT_SWEEPS,
                     thin: int = DEFAULT_THIN, seed: int | None = None,
-                    init: Any = "observed", progress: bool = False,
+                    init: Any = "observed", progress: bool = False, memoise: bool = True,
                     **options: Any) -> np.ndarray:
     """Draw ``n`` labellings from ``p(x | theta) ∝ exp(-U(x; theta))`` by Gibbs sweeps.
 
@@ -407,6 +407,11 @@ def simulate_labels(scene: Any, theta: Any, n: int = 1, *, n_sweeps: int = DEFAU
         allowed ones, or the labelling given.
     progress : bool
         Show a tqdm bar over the sweeps.
+    memoise : bool
+        Keep rendered radiances in the field's memo
+        (:class:`~mrfpe.models.label_render.RadianceMemo`, if it fits its share of the
+        memory budget); ``False`` renders every term at every update. The chain is the
+        same either way, bit for bit.
     **options
         ``data_term``, ``sigma_b``, ``prior``, ``prior_weight``, ``temperature``
         (:func:`label_field`), for a Scene.
@@ -421,6 +426,7 @@ def simulate_labels(scene: Any, theta: Any, n: int = 1, *, n_sweeps: int = DEFAU
     n_sweeps = check_positive_int("n_sweeps", n_sweeps, minimum=0)
     thin = check_positive_int("thin", thin)
     check_bool("progress", progress)
+    check_bool("memoise", memoise)
     rng = np.random.default_rng(check_seed(seed))
     coef = _coefficients(field, theta)
     B, n_nodes = field.n_labels, field.n_nodes
@@ -429,14 +435,13 @@ def simulate_labels(scene: Any, theta: Any, n: int = 1, *, n_sweeps: int = DEFAU
                  f"simulating {n} labellings of a {field.scene.shape[0]}x"
                  f"{field.scene.shape[1]} scene with {B} labels", "draw fewer at a time")
     x = _start(field, init, rng)
-    memo = memo_for(field, coef)
+    memo = memo_for(field, coef) if memoise else None
     codings = field.scene.lattice.codings()
     out = np.empty((n, n_nodes), dtype=np.int64)
     total = n_sweeps + thin * (n - 1)
     if n_sweeps == 0:
         out[0] = x
     from tqdm.auto import tqdm
-
 
     for s in tqdm(range(1, total + 1), disable=not progress, leave=False,
                   desc="label sweeps", unit="sweep"):

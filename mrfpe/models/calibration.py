@@ -384,10 +384,11 @@ class AdjustedPL(Target):
         if edge.any():
             raise ValueError(f"the MPLE lies on (or within one PL sd of) the bounds' face for "
                              f"{[self.param_names[i] for i in np.flatnonzero(edge)]} "
-                             f"(theta {theta_pl.round(4).tolist()}, PL sd "
-                             f"{sd.round(4).tolist()}): the adjustment needs an interior mode "
-                             f"(widen the bounds, or the data carry no information on these "
-                             f"parameters)")
+                             f"(theta {theta_pl.round(4).tolist()}"
+                             + (f", PL sd {sd.round(4).tolist()}" if sd.any() else "")
+                             + "): the adjustment needs an interior mode "
+                             "(widen the bounds, or the data carry no information on these "
+                             "parameters)")
 
     def _curvature(self, theta_pl: np.ndarray) -> np.ndarray:
         """The PL's negative Hessian at the MPLE (refused where it is not finite)."""

@@ -3,10 +3,11 @@
 Reads ``trials/`` (written by ``run.py``) and writes ``report.md``. Only specimens with both
 clouds enter the classification tables (a refused calibration is listed, and the tables say
 how many specimens they cover); classes are the materials, as in ``../classification``.
-Moments (mean, sd) come from the weighted PMC clouds; the distances compare
-:data:`SET_SIZE` equally weighted points drawn from each cloud by systematic resampling
-(the size of the classification study's sets; exact EMD between 4000-point sets would
-take hours).
+Each target's own moments are exp(PL_s)'s importance-sampled mean and covariance (which
+the calibration maps) and the calibrated target's (θ_ML + δ, I⁻¹, by construction); the
+distances compare :data:`SET_SIZE` equally weighted points drawn from each PMC cloud by
+systematic resampling (the size of the classification study's sets; exact EMD between
+4000-point sets would take hours), or from the normal with a target's own moments.
 
     python docs/results/calibrated_classification/report.py [--jobs 2]
 """
@@ -52,46 +53,57 @@ def feature_set(ds: xr.Dataset, prefix: str) -> xr.Dataset:
 
 def gaussian_set(ds: xr.Dataset, which: str) -> xr.Dataset:
     """:data:`SET_SIZE` points from the normal with the target's own centre and covariance
-    (:func:`target_moments`; the PL's inverse Hessian, or I⁻¹), free of sampling error."""
+    (:func:`target_moments`), free of PMC's sampling error."""
     names = [str(p) for p in ds["param"].values]
-    cov = np.linalg.inv(ds["pl_hessian" if which == "pl" else "fisher_information"].values)
-    centre = ds["theta_mple" if which == "pl" else "theta_adjusted"].values
+    m = target_moments(ds)
+    centre, cov = m[f"{which}_centre"], m[f"{which}_cov"]
     z = np.random.default_rng(0).standard_normal((SET_SIZE, centre.size))
     return posterior_set(centre + z @ np.linalg.cholesky(cov).T, np.zeros(SET_SIZE), names,
                          centre)
 
 
-def load() -> list[xr.Dataset]:
+def load(trials: Path) -> list[xr.Dataset]:
     out = []
-    for path in sorted((HERE / "trials").glob("*.nc")):
+    for path in sorted(trials.glob("*.nc")):
         with xr.open_dataset(path) as ds:
             out.append(ds.load())
     return out
 
 
 def target_moments(ds: xr.Dataset) -> dict[str, np.ndarray]:
-    """Each target's own centre and sd: exp(PL_s)'s Laplace approximation (MPLE, the PL's
-    Hessian there) and the calibrated target's mean and covariance (θ_ML + δ, I⁻¹), which
-    ``align="moments"`` gives it by construction."""
-    return {"pl_centre": ds["theta_mple"].values,
-            "pl_sd": np.sqrt(np.diag(np.linalg.inv(ds["pl_hessian"].values))),
-            "adj_centre": ds["theta_adjusted"].values,
-            "adj_sd": np.sqrt(np.diag(np.linalg.inv(ds["fisher_information"].values)))}
+    """Each target's own centre, covariance and sd: exp(PL_s)'s importance-sampled mean and
+    covariance (``AdjustedPL.pl_covariance``) and the calibrated target's (θ_ML + δ, I⁻¹),
+    which ``align="moments"`` gives it by construction."""
+    out = {"pl_centre": ds["pl_mean"].values, "pl_cov": ds["pl_covariance"].values,
+           "adj_centre": ds["theta_adjusted"].values,
+           "adj_cov": np.linalg.inv(ds["fisher_information"].values)}
+    out.update({f"{k}_sd": np.sqrt(np.diag(out[f"{k}_cov"])) for k in ("pl", "adj")})
+    return out
+
+
+def laplace_sd(ds: xr.Dataset) -> np.ndarray:
+    """exp(PL_s)'s Laplace sd, from the PL's curvature at the MPLE (NaN where its negative
+    Hessian is not positive definite)."""
+    H = ds["pl_hessian"].values
+    if not np.all(np.linalg.eigvalsh(H) > 0):
+        return np.full(H.shape[0], np.nan)
+    return np.sqrt(np.diag(np.linalg.inv(H)))
 
 
 def span(v: np.ndarray) -> str:
-    return f"{np.median(v):.2f} [{v.min():.2f}, {v.max():.2f}]"
+    return f"{np.nanmedian(v):.2f} [{np.nanmin(v):.2f}, {np.nanmax(v):.2f}]"
 
 
 def shifts(group: list[xr.Dataset]) -> list[list]:
     """Per parameter: the calibrated target's centre move and sd ratio against exp(PL_s)'s,
     each target's distance from the truth in its own sd, and each PMC cloud's weighted sd
-    against its target's sd."""
+    against its target's sd, and exp(PL_s)'s Laplace sd against its sd."""
     names = [str(p) for p in group[0]["param"].values]
     cols: dict[str, list] = {k: [] for k in ("move", "ratio", "err_pl", "err_adj", "pmc_pl",
-                                              "pmc_adj")}
+                                              "pmc_adj", "laplace")}
     for ds in group:
         m, truth = target_moments(ds), ds["truth"].values
+        cols["laplace"].append(laplace_sd(ds) / m["pl_sd"])
         cols["move"].append((m["adj_centre"] - m["pl_centre"]) / m["pl_sd"])
         cols["ratio"].append(m["adj_sd"] / m["pl_sd"])
         cols["err_pl"].append(np.abs(m["pl_centre"] - truth) / m["pl_sd"])
@@ -145,8 +157,9 @@ def classification(group: list[xr.Dataset], jobs: int) -> str:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--jobs", type=int, default=1, help="processes for the pair loops")
+    ap.add_argument("--trials", type=Path, default=HERE / "trials", help="the trial files")
     args = ap.parse_args()
-    trials = load()
+    trials = load(args.trials)
     sections = []
     for brdf in ("ward", "phong"):
         group = [ds for ds in trials if json.loads(ds.attrs["cell"])["brdf"] == brdf]
@@ -176,11 +189,13 @@ def main() -> None:
             "What calibration changed, per parameter (median [min, max] over specimens), "
             "measured on the targets themselves: the centre's move in exp(PL_s) sd, the sd "
             "ratio calibrated / exp(PL_s), each target's distance from the material's true "
-            "parameters in its own sd, and each PMC cloud's weighted sd over its target's "
-            "sd.\n\n"
+            "parameters in its own sd, each PMC cloud's weighted sd over its target's "
+            "sd, and exp(PL_s)'s Laplace sd (the PL's curvature at the MPLE) over its sd "
+            "(blank where the curvature is not negative definite).\n\n"
             + markdown_table(["param", "centre move (PL sd)", "sd ratio",
-                              "|MPLE − truth| / PL sd", "|calibrated − truth| / its sd",
-                              "PMC sd / sd, exp(PL_s)", "PMC sd / sd, calibrated"],
+                              "|exp(PL_s) mean − truth| / its sd",
+                              "|calibrated − truth| / its sd", "PMC sd / sd, exp(PL_s)",
+                              "PMC sd / sd, calibrated", "Laplace sd / sd, exp(PL_s)"],
                              shifts(both))
             + "\n\nTrue parameters within 2 sd of the centre in every parameter: "
             "exp(PL_s) {} of {n}, calibrated {} of {n}.".format(*covered(both), n=len(both))

@@ -26,6 +26,7 @@ is refused (an MPLE on the box's face, a singular Fisher information) is recorde
 with the reason and its ``pl`` cloud.
 
     python docs/results/calibrated_classification/run.py --shard 0 2   # and --shard 1 2
+    python docs/results/calibrated_classification/run.py --shape 100 100 --shard 0 2  # full size
     python docs/results/calibrated_classification/report.py
 """
 
@@ -78,13 +79,14 @@ def cloud(post: xr.Dataset, prefix: str) -> dict:
             f"{prefix}_reliable": ((), bool(post.attrs.get("diag_reliable", True)))}
 
 
-def run_one(config: dict, cell: dict, seed: int) -> xr.Dataset:
-    scene, u, _ = specimen_scene({**config, **cell}, seed, shape=SHAPE)
+def run_one(config: dict, cell: dict, seed: int,
+            shape: tuple[int, int] = SHAPE) -> xr.Dataset:
+    scene, u, _ = specimen_scene({**config, **cell}, seed, shape=shape)
     s_pl, s_adj, s_cal = (int(s) for s in np.random.SeedSequence([seed, 7]).generate_state(3))
     pl = mrfpe.targets.get(config["target"], scene, **config["target_options"])
     data = cloud(mrfpe.sample("pmc", pl, seed=s_pl, **PMC), "pl")
     attrs: dict = {"cell": json.dumps(cell), "seed": seed, "calibration": json.dumps(CALIBRATION),
-                   "pmc": json.dumps(PMC), "shape": json.dumps(SHAPE),
+                   "pmc": json.dumps(PMC), "shape": json.dumps(list(shape)),
                    "mrfpe_version": mrfpe.__version__}
     t0 = time.perf_counter()
     try:
@@ -115,12 +117,19 @@ def run_one(config: dict, cell: dict, seed: int) -> xr.Dataset:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--shard", nargs=2, type=int, default=(0, 1), metavar=("K", "N"))
-    ap.add_argument("--trials", type=Path, default=TRIALS, help="where the trial files go")
+    ap.add_argument("--shape", nargs=2, type=int, default=SHAPE, metavar=("H", "W"),
+                    help=f"image size (default {SHAPE[0]} {SHAPE[1]})")
+    ap.add_argument("--trials", type=Path, default=None,
+                    help="where the trial files go (default trials/, or trials_HxW/ for "
+                         "another --shape)")
     ap.add_argument("--limit", type=int, default=None, help="at most this many specimens")
     ap.add_argument("--reverse", action="store_true",
                     help="take the shard from its end (a second process on an unfinished shard)")
     args = ap.parse_args()
     config = json.loads((SOURCE / "config.json").read_text())["config"]
+    shape = tuple(args.shape)
+    if args.trials is None:
+        args.trials = TRIALS if shape == SHAPE else HERE / f"trials_{shape[0]}x{shape[1]}"
     args.trials.mkdir(exist_ok=True)
     todo = specimens(config)[args.shard[0]::args.shard[1]]
     todo = (todo[::-1] if args.reverse else todo)[:args.limit]
@@ -129,7 +138,7 @@ def main() -> None:
         if path.exists():
             continue
         t0 = time.perf_counter()
-        ds = run_one(config, cell, seed)
+        ds = run_one(config, cell, seed, shape)
         ds.attrs["wall_time_s"] = time.perf_counter() - t0
         write_atomic(ds, path)
         print(f"{path.name}: {ds.attrs['wall_time_s']:.0f} s"

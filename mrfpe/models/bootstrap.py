@@ -1,7 +1,7 @@
 """Parametric-bootstrap intervals for a model's point estimate (the MPLE by default).
 
 Fit the data, simulate data sets of the same size at the estimate with the
-model's simulator (:func:`mrfpe.models.calibration.simulate_draws`), refit each:
+model's simulator (:func:`mrfpe.models.draws.simulate_draws`), refit each:
 the refits' spread is the estimator's sampling distribution at the estimate, as
 R's ngspatial reports for the MPLE of an autologistic model.
 """
@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from mrfpe.models.calibration import simulate_draws
+from mrfpe.models.draws import simulate_draws
 from mrfpe.targets.maximise import maximise
 
 __all__ = ["parametric_bootstrap"]

@@ -99,7 +99,7 @@ scenes but was still above it after 60 sweeps on the Ward 40 x 40 (seed 5): star
 from the observed labelling (the default) or burn in longer. The defaults
 are ten times the largest ``tau`` of burn-in, :data:`DEFAULT_SWEEPS` = 120, and
 one ``tau`` between draws, :data:`DEFAULT_THIN` = 12 (the rule of
-:func:`mrfpe.models.calibration.simulate_draws`). Chains at other parameters,
+:func:`mrfpe.models.draws.simulate_draws`). Chains at other parameters,
 priors or scene sizes may mix more slowly;
 :func:`mrfpe.models.mixing.autocorrelation_time` measures them.
 """
@@ -114,13 +114,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from mrfpe.budget import check_memory
-from mrfpe.models.label_render import (
-    BATCH_TRIANGLES,
-    data_terms,
-    memo_at,
-    memo_for,
-    term_energies,
-)
+from mrfpe.models.label_render import BATCH_TRIANGLES, data_terms, memo_at, memo_for, term_energies
 from mrfpe.targets import reflectance
 from mrfpe.targets.brdf_target import auto_sigma_b
 from mrfpe.targets.energy import DATA_TERMS
@@ -408,10 +402,8 @@ def simulate_labels(scene: Any, theta: Any, n: int = 1, *, n_sweeps: int = DEFAU
     progress : bool
         Show a tqdm bar over the sweeps.
     memoise : bool
-        Keep rendered radiances in the field's memo
-        (:class:`~mrfpe.models.label_render.RadianceMemo`, if it fits its share of the
-        memory budget); ``False`` renders every term at every update. The chain is the
-        same either way, bit for bit.
+        Keep radiances in a :class:`~mrfpe.models.label_render.RadianceMemo` (if it fits);
+        ``False`` renders every term at every update. The same chain either way.
     **options
         ``data_term``, ``sigma_b``, ``prior``, ``prior_weight``, ``temperature``
         (:func:`label_field`), for a Scene.

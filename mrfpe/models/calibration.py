@@ -41,135 +41,27 @@ the adjusted target with PMC and compare its cloud with the moments it promises)
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from scipy.optimize import minimize
 from scipy.special import logsumexp
 
-from mrfpe.models.mixing import autocorrelation_time
+from mrfpe.models.draws import (
+    Draws,
+    _log_f_of,
+    _scores,
+    _step,
+    fisher_information,
+    simulate_draws,
+)
 from mrfpe.models.pl_spread import hessian, pl_moments, start_covariance
 from mrfpe.targets.base import Target, as_theta_batch
 from mrfpe.targets.maximise import maximise
 
 __all__ = ["AdjustedPL", "Draws", "fisher_information", "hessian", "mcmc_mle",
            "simulate_draws"]
-
-
-@dataclass(frozen=True)
-class Draws:
-    """Draws ``y_k ~ p(· | θ)`` of one configuration each, with the chain's settings."""
-
-    theta: np.ndarray
-    y: np.ndarray  # (K, n_nodes)
-    tau: float
-    burn_in: int
-    thin: int
-    memo: dict = field(default_factory=dict, repr=False, compare=False)
-
-    @property
-    def n_sweeps(self) -> int:
-        return int(self.burn_in + self.thin * (self.y.shape[0] - 1))
-
-
-def simulate_draws(lik: Any, theta: Any, n_draws: int, *, seed: int,
-                   pilot_sweeps: int = 2000) -> Draws:
-    """``n_draws`` configurations at ``theta`` from one chain started at the data.
-
-    Exact simulators give independent draws; otherwise the chain's autocorrelation
-    time ``τ`` is measured first (a pilot chain of at least ``pilot_sweeps`` and 50 τ
-    sweeps, :func:`~mrfpe.models.mixing.autocorrelation_time`), then the chain runs
-    ``max(10 τ, 10)`` sweeps of burn-in and keeps a draw every ``max(1, ⌈τ⌉)`` sweeps.
-    """
-    th = as_theta_batch(theta, lik.ndim)[0]
-    rng = np.random.default_rng(seed)
-    if getattr(lik, "exact_simulator", False):
-        y = lik.simulate(th, n=n_draws, seed=int(rng.integers(2**63)))
-        return Draws(th, np.asarray(y), 0.0, 0, 1)
-    tau = autocorrelation_time(lik, th, seed=int(rng.integers(2**63)), min_sweeps=pilot_sweeps)
-    if not math.isfinite(tau):
-        raise ValueError(f"the model's simulator does not mix at theta {th.tolist()}: its "
-                         f"autocorrelation time exceeds the pilot run (use a simulator that "
-                         f"mixes, e.g. sampler='swendsen_wang' for Potts models)")
-    burn, thin = max(10, math.ceil(10 * tau)), max(1, math.ceil(tau))
-    y = lik.simulate(th, n=n_draws, seed=int(rng.integers(2**63)), init=lik.x[0],
-                     n_sweeps=burn, thin=thin)
-    return Draws(th, np.asarray(y), tau, burn, thin)
-
-
-def _log_f_of(lik: Any, draws: Draws) -> Any:
-    """``theta (N, d) -> log f(y_k | θ_j)`` (N, K) for the draws (one configuration each),
-    made once per draws.
-
-    For a design model the draws' sufficient statistics are computed once, so each
-    call is one matrix product; a target with a ``log_f_of_draws(y)`` method (e.g.
-    the BRDF likelihood, which keeps each draw's geometry) supplies its own.
-    """
-    if "log_f" not in draws.memo:
-        draws.memo["log_f"] = _make_log_f(lik, draws.y)
-    return draws.memo["log_f"]
-
-
-def _make_log_f(lik: Any, y: np.ndarray) -> Any:
-    own = getattr(lik, "log_f_of_draws", None)
-    if callable(own):
-        return own(y)
-    stats = getattr(lik, "sufficient_statistics", None)
-    design = getattr(lik, "design", None)
-    if callable(stats) and design is not None:
-        S = stats(y).T
-        return lambda theta: design.psi(theta) @ S
-    return lambda theta: np.stack([lik.unnormalised(theta, yk[None]) for yk in y], axis=1)
-
-
-def _scores(lik: Any, draws: Draws, h: np.ndarray) -> np.ndarray:
-    """``∇_θ log f(y_k | θ)`` (K, d) at the draws' θ by central differences (exact for
-    log-linear models)."""
-    theta = draws.theta
-    d = theta.size
-    steps = np.concatenate([theta + np.diag(h), theta - np.diag(h)])
-    lf = _log_f_of(lik, draws)(steps)  # (2d, K)
-    return ((lf[:d] - lf[d:]) / (2 * h)[:, None]).T
-
-
-def _step(target: Any, theta: np.ndarray | None = None) -> np.ndarray:
-    """Finite-difference steps: 1e-4 of the parameter's scale, at most 1e-4 of its range.
-
-    The scale is ``|θ|`` (at least 1 % of the range), so that a wide box (say a
-    precision in ``(0, 10^4)``) does not step across the point's own magnitude.
-    """
-    b = np.asarray(target.bounds, dtype=np.float64)
-    width = b[:, 1] - b[:, 0]
-    if theta is None:
-        return 1e-4 * width
-    return 1e-4 * np.minimum(width, np.maximum(np.abs(theta), 1e-2 * width))
-
-
-def fisher_information(lik: Any, draws: Draws) -> np.ndarray:
-    """``I(θ) = M Cov_k[∇ log f(y_k | θ)]`` (d, d) at the draws' θ (M observations).
-
-    Raises ValueError naming the parameter whose score does not vary (a singular
-    information: every draw at this θ has the same statistic -- e.g. uniform lattices
-    on the coupling's bound -- or the data cannot identify the parameter).
-    """
-    s = _scores(lik, draws, _step(lik, draws.theta))
-    cov = np.atleast_2d(np.cov(s, rowvar=False))
-    M = int(getattr(lik, "n_observations", 1))
-    info = M * cov
-    names = list(lik.param_names)
-    flat = np.flatnonzero(np.diag(info) <= 1e-12 * max(1.0, np.abs(info).max()))
-    if flat.size:
-        raise ValueError(f"the Fisher information is singular at theta {draws.theta.tolist()}: "
-                         f"the score of {names[flat[0]]!r} does not vary over "
-                         f"{draws.y.shape[0]} simulations (the model is degenerate at this "
-                         f"theta, or the data cannot identify the parameter)")
-    w = np.linalg.eigvalsh(info)
-    if w[0] <= 1e-10 * w[-1]:
-        raise ValueError(f"the Fisher information is singular at theta {draws.theta.tolist()} "
-                         f"(condition number {w[-1] / max(w[0], 1e-300):.3g}): some combination "
-                         f"of {names} is not identified by the data")
-    return info
 
 
 @dataclass(frozen=True)
@@ -310,11 +202,8 @@ class AdjustedPL(Target):
     def __init__(self, pl: Any, lik: Any, *, mode: str = "mcmc_mle", align: str = "moments",
                  n_draws: int = 1000, max_rounds: int = 10, pilot_sweeps: int = 2000,
                  seed: int = 0) -> None:
-        self.pl, self.lik = pl, lik
-        self.param_names = tuple(pl.param_names)
-        self.bounds = np.asarray(pl.bounds, dtype=np.float64)
-        self.name = getattr(pl, "name", "pl").replace(":pl", "") + ":pl_adjusted"
-        self.cost = float(getattr(pl, "cost", 1.0))
+        self._set_pl(pl)
+        self.lik = lik
         if mode not in ("mcmc_mle", "mple"):
             raise ValueError(f"mode must be 'mcmc_mle' or 'mple'; got {mode!r}")
         if align not in ("mode", "moments"):
@@ -364,17 +253,41 @@ class AdjustedPL(Target):
             theta_ml = theta_pl
         l_info = np.linalg.cholesky(info)  # I = L_I L_Iᵀ
         if align == "mode":  # Aᵀ H A = I: the Hessian at the mode is the Fisher information
-            self.centre = theta_pl
-            self.W = np.linalg.solve(m_chol, l_info.T)
+            centre, W = theta_pl, np.linalg.solve(m_chol, l_info.T)
         else:  # A⁻¹ C A⁻ᵀ = I⁻¹: the covariance is the inverse Fisher information
-            self.centre = mom.mean
-            self.W = np.linalg.cholesky(pl_cov) @ l_info.T
+            centre, W = mom.mean, np.linalg.cholesky(pl_cov) @ l_info.T
             if self.mle is not None:  # mean = MLE + the likelihood's skew (Laplace expansion)
                 theta_ml = theta_ml + _skew_shift(lik, self.mle.draws, info)
-        self.theta_pl, self.theta_ml = theta_pl, theta_ml
+        self._set_map(centre, W, theta_ml, theta_pl)
         self.fisher_information, self.pl_hessian, self.pl_covariance = info, H, pl_cov
         self.n_simulation_sweeps = int(sims)
-        self._offset = float(pl._log_prob(theta_pl[None])[0])
+
+    @classmethod
+    def restore(cls, pl: Any, *, centre: Any, W: Any, theta_ml: Any,
+                theta_pl: Any) -> AdjustedPL:
+        """The target of an earlier calibration, from its map (``centre``, ``W``,
+        ``theta_ml``, ``theta_pl``, as :meth:`describe` and saved results hold them):
+        the same log-density without simulating again. The calibration's statistics
+        (``fisher_information``, ``mle``, ``pl_covariance``, ...) are not restored."""
+        self = cls.__new__(cls)
+        self._set_pl(pl)
+        self.lik = self.mode = self.align = self.mle = None
+        self.fisher_information = self.pl_hessian = self.pl_covariance = None
+        self.n_simulation_sweeps = 0
+        self._set_map(*(np.array(v, dtype=np.float64) for v in (centre, W, theta_ml, theta_pl)))
+        return self
+
+    def _set_pl(self, pl: Any) -> None:
+        self.pl = pl
+        self.param_names = tuple(pl.param_names)
+        self.bounds = np.asarray(pl.bounds, dtype=np.float64)
+        self.name = getattr(pl, "name", "pl").replace(":pl", "") + ":pl_adjusted"
+        self.cost = float(getattr(pl, "cost", 1.0))
+
+    def _set_map(self, centre: np.ndarray, W: np.ndarray, theta_ml: np.ndarray,
+                 theta_pl: np.ndarray) -> None:
+        self.centre, self.W, self.theta_ml, self.theta_pl = centre, W, theta_ml, theta_pl
+        self._offset = float(self.pl._log_prob(theta_pl[None])[0])
 
     def _check_interior(self, theta_pl: np.ndarray, sd: np.ndarray) -> None:
         """Refuse an MPLE on the box's face or within one PL sd of it."""
@@ -410,13 +323,21 @@ class AdjustedPL(Target):
         return self.pl._row_bytes()
 
     def _log_prob(self, theta: np.ndarray) -> np.ndarray:
-        return self.pl._log_prob(self.to_pl(theta)) - self._offset
+        # exp(PL) lives on its box (its moments were taken there): a parameter the map
+        # sends outside it has no density, however the PL's formula extrapolates
+        z = self.to_pl(theta)
+        out = np.full(z.shape[0], -np.inf)
+        inside = self.pl.in_bounds(z)
+        if inside.any():
+            out[inside] = self.pl._log_prob(z[inside]) - self._offset
+        return out
 
     def describe(self) -> dict:
         return {**self.pl.describe(), "name": self.name, "class": type(self).__name__,
                 "estimator": "pl_adjusted", "mode": self.mode, "align": self.align,
                 "theta_mple": self.theta_pl.tolist(), "theta_mode": self.theta_ml.tolist(),
-                "W": self.W.tolist(), "n_simulation_sweeps": self.n_simulation_sweeps}
+                "centre": self.centre.tolist(), "W": self.W.tolist(),
+                "n_simulation_sweeps": self.n_simulation_sweeps}
 
 
 def _skew_shift(lik: Any, draws: Draws, info: np.ndarray) -> np.ndarray:

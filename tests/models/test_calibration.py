@@ -141,3 +141,30 @@ def test_mcmc_mle_does_not_jump_between_phases_near_the_critical_coupling():
         mcmc_mle(m.target("likelihood", x), mple, seed=seed)
     adj = m.target("pl_adjusted", x, seed=1241352075385643944)  # builds, on the MLE
     assert np.all(np.abs(adj.mle.theta - mle) < 0.3 * adj.mle.se)
+
+
+def test_the_adjusted_target_has_no_density_where_its_map_leaves_the_pl_box(ising):
+    """exp(PL) lives on its box: a parameter mapped outside it is -inf, not the PL's
+    formula extrapolated (which on a BRDF scene can exceed the PL's maximum)."""
+    m, x, _exact, _lik, pl = ising
+    adj = m.target("pl_adjusted", x, seed=2)
+    b = adj.bounds
+    G = np.stack(np.meshgrid(*[np.linspace(lo, hi, 41) for lo, hi in b], indexing="ij"),
+                 -1).reshape(-1, 2)
+    z = adj.to_pl(G)
+    outside = ~pl.in_bounds(z)
+    assert outside.any() and (~outside).any()
+    lp = adj.log_prob(G)
+    assert np.all(lp[outside] == -np.inf)
+    np.testing.assert_array_equal(lp[~outside], pl._log_prob(z[~outside]) - adj._offset)
+
+
+def test_a_restored_calibration_is_the_same_target(ising):
+    m, x, _exact, _lik, pl = ising
+    adj = m.target("pl_adjusted", x, seed=2)
+    d = adj.describe()
+    again = AdjustedPL.restore(pl, centre=d["centre"], W=d["W"], theta_ml=d["theta_mode"],
+                               theta_pl=d["theta_mple"])
+    G = adj.theta_ml + np.random.default_rng(0).normal(0.0, 0.2, (200, 2))
+    np.testing.assert_array_equal(again.log_prob(G), adj.log_prob(G))
+    assert again.fisher_information is None and again.param_names == adj.param_names

@@ -27,6 +27,8 @@ with the reason and its ``pl`` cloud.
 
     python docs/results/calibrated_classification/run.py --shard 0 2   # and --shard 1 2
     python docs/results/calibrated_classification/run.py --shape 100 100 --shard 0 2  # full size
+    python docs/results/calibrated_classification/run.py --refresh-adjusted --shard 0 2  # after
+        # a change to the calibrated target's density: its clouds, from the saved calibrations
     python docs/results/calibrated_classification/report.py
 """
 
@@ -34,6 +36,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import subprocess
 import sys
 import time
 import warnings
@@ -44,6 +47,7 @@ import xarray as xr
 
 import mrfpe
 from mrfpe.experiments.classification import specimen_scene
+from mrfpe.models.calibration import AdjustedPL
 from mrfpe.netcdf import write_atomic
 
 HERE = Path(__file__).resolve().parent
@@ -79,6 +83,39 @@ def cloud(post: xr.Dataset, prefix: str) -> dict:
             f"{prefix}_reliable": ((), bool(post.attrs.get("diag_reliable", True)))}
 
 
+def calibrated_pl(scene):
+    """The pseudolikelihood that ``pl_adjusted`` with ``prior="range"`` calibrates (its
+    default options), for :meth:`~mrfpe.models.calibration.AdjustedPL.restore`."""
+    return mrfpe.targets.get("pls", scene, sigma_b="auto", data_term="pixel", prior_weight=1.0)
+
+
+def refresh_adjusted(config: dict, path: Path) -> bool:
+    """Sample a trial's calibrated target again from its saved calibration (the map
+    ``pl_mean``, ``W``, ``theta_adjusted``, ``theta_mple``), without simulating; False if
+    the trial has no calibration."""
+    ds = xr.load_dataset(path)
+    if "refused" in ds.attrs:
+        return False
+    cell, seed = json.loads(ds.attrs["cell"]), int(ds.attrs["seed"])
+    scene, _, _ = specimen_scene({**config, **cell}, seed, shape=tuple(json.loads(
+        ds.attrs["shape"])))
+    adj = AdjustedPL.restore(calibrated_pl(scene), centre=ds["pl_mean"].values,
+                             W=ds["W"].values, theta_ml=ds["theta_adjusted"].values,
+                             theta_pl=ds["theta_mple"].values)
+    s_adj = int(np.random.SeedSequence([seed, 7]).generate_state(3)[1])
+    for name, (dims, value) in cloud(mrfpe.sample("pmc", adj, seed=s_adj, **PMC),
+                                     "adjusted").items():
+        ds[name] = (dims, value)
+    ds.attrs["adjusted_sampled_at"] = library_commit()
+    write_atomic(ds, path)
+    return True
+
+
+def library_commit() -> str:
+    return subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=HERE, text=True,
+                          capture_output=True, check=True).stdout.strip()
+
+
 def run_one(config: dict, cell: dict, seed: int,
             shape: tuple[int, int] = SHAPE) -> xr.Dataset:
     scene, u, _ = specimen_scene({**config, **cell}, seed, shape=shape)
@@ -99,6 +136,7 @@ def run_one(config: dict, cell: dict, seed: int,
     else:
         build_s = time.perf_counter() - t0
         data.update(cloud(mrfpe.sample("pmc", adj, seed=s_adj, **PMC), "adjusted"))
+        attrs["adjusted_sampled_at"] = library_commit()
         mle = adj.mle
         d2 = ("param", "param2")
         data.update({
@@ -122,6 +160,9 @@ def main() -> None:
     ap.add_argument("--trials", type=Path, default=None,
                     help="where the trial files go (default trials/, or trials_HxW/ for "
                          "another --shape)")
+    ap.add_argument("--refresh-adjusted", action="store_true",
+                    help="sample the calibrated targets of existing trials again from their "
+                         "saved calibration (after a library change to the target's density)")
     ap.add_argument("--limit", type=int, default=None, help="at most this many specimens")
     ap.add_argument("--reverse", action="store_true",
                     help="take the shard from its end (a second process on an unfinished shard)")
@@ -133,6 +174,19 @@ def main() -> None:
     args.trials.mkdir(exist_ok=True)
     todo = specimens(config)[args.shard[0]::args.shard[1]]
     todo = (todo[::-1] if args.reverse else todo)[:args.limit]
+    if args.refresh_adjusted:
+        head = library_commit()
+        for cell, _ in todo:
+            path = args.trials / "brdf={brdf},material={material},specimen={specimen}.nc".format(
+                **cell)
+            with xr.open_dataset(path) as ds:
+                if ds.attrs.get("adjusted_sampled_at") == head:
+                    continue
+            t0 = time.perf_counter()
+            if refresh_adjusted(config, path):
+                print(f"{path.name}: calibrated cloud sampled again at {head} in "
+                      f"{time.perf_counter() - t0:.0f} s", flush=True)
+        return
     for cell, seed in todo:
         path = args.trials / "brdf={brdf},material={material},specimen={specimen}.nc".format(**cell)
         if path.exists():

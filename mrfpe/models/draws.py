@@ -1,0 +1,136 @@
+"""Simulations from a model at one parameter vector, and what they estimate there.
+
+:func:`simulate_draws` runs the model's simulator from the data (an exact
+simulator, or a chain whose burn-in and thinning follow its measured
+autocorrelation time); :func:`fisher_information` is ``M Cov[∇ log f(y | θ)]``
+over the draws, the statistic :mod:`mrfpe.models.calibration` and
+:mod:`mrfpe.models.bootstrap` build on.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from mrfpe.models.mixing import autocorrelation_time
+from mrfpe.targets.base import as_theta_batch
+
+__all__ = ["Draws", "fisher_information", "simulate_draws"]
+
+
+@dataclass(frozen=True)
+class Draws:
+    """Draws ``y_k ~ p(· | θ)`` of one configuration each, with the chain's settings."""
+
+    theta: np.ndarray
+    y: np.ndarray  # (K, n_nodes)
+    tau: float
+    burn_in: int
+    thin: int
+    memo: dict = field(default_factory=dict, repr=False, compare=False)
+
+    @property
+    def n_sweeps(self) -> int:
+        return int(self.burn_in + self.thin * (self.y.shape[0] - 1))
+
+
+def simulate_draws(lik: Any, theta: Any, n_draws: int, *, seed: int,
+                   pilot_sweeps: int = 2000) -> Draws:
+    """``n_draws`` configurations at ``theta`` from one chain started at the data.
+
+    Exact simulators give independent draws; otherwise the chain's autocorrelation
+    time ``τ`` is measured first (a pilot chain of at least ``pilot_sweeps`` and 50 τ
+    sweeps, :func:`~mrfpe.models.mixing.autocorrelation_time`), then the chain runs
+    ``max(10 τ, 10)`` sweeps of burn-in and keeps a draw every ``max(1, ⌈τ⌉)`` sweeps.
+    """
+    th = as_theta_batch(theta, lik.ndim)[0]
+    rng = np.random.default_rng(seed)
+    if getattr(lik, "exact_simulator", False):
+        y = lik.simulate(th, n=n_draws, seed=int(rng.integers(2**63)))
+        return Draws(th, np.asarray(y), 0.0, 0, 1)
+    tau = autocorrelation_time(lik, th, seed=int(rng.integers(2**63)), min_sweeps=pilot_sweeps)
+    if not math.isfinite(tau):
+        raise ValueError(f"the model's simulator does not mix at theta {th.tolist()}: its "
+                         f"autocorrelation time exceeds the pilot run (use a simulator that "
+                         f"mixes, e.g. sampler='swendsen_wang' for Potts models)")
+    burn, thin = max(10, math.ceil(10 * tau)), max(1, math.ceil(tau))
+    y = lik.simulate(th, n=n_draws, seed=int(rng.integers(2**63)), init=lik.x[0],
+                     n_sweeps=burn, thin=thin)
+    return Draws(th, np.asarray(y), tau, burn, thin)
+
+
+def _log_f_of(lik: Any, draws: Draws) -> Any:
+    """``theta (N, d) -> log f(y_k | θ_j)`` (N, K) for the draws (one configuration each),
+    made once per draws.
+
+    For a design model the draws' sufficient statistics are computed once, so each
+    call is one matrix product; a target with a ``log_f_of_draws(y)`` method (e.g.
+    the BRDF likelihood, which keeps each draw's geometry) supplies its own.
+    """
+    if "log_f" not in draws.memo:
+        draws.memo["log_f"] = _make_log_f(lik, draws.y)
+    return draws.memo["log_f"]
+
+
+def _make_log_f(lik: Any, y: np.ndarray) -> Any:
+    own = getattr(lik, "log_f_of_draws", None)
+    if callable(own):
+        return own(y)
+    stats = getattr(lik, "sufficient_statistics", None)
+    design = getattr(lik, "design", None)
+    if callable(stats) and design is not None:
+        S = stats(y).T
+        return lambda theta: design.psi(theta) @ S
+    return lambda theta: np.stack([lik.unnormalised(theta, yk[None]) for yk in y], axis=1)
+
+
+def _scores(lik: Any, draws: Draws, h: np.ndarray) -> np.ndarray:
+    """``∇_θ log f(y_k | θ)`` (K, d) at the draws' θ by central differences (exact for
+    log-linear models)."""
+    theta = draws.theta
+    d = theta.size
+    steps = np.concatenate([theta + np.diag(h), theta - np.diag(h)])
+    lf = _log_f_of(lik, draws)(steps)  # (2d, K)
+    return ((lf[:d] - lf[d:]) / (2 * h)[:, None]).T
+
+
+def _step(target: Any, theta: np.ndarray | None = None) -> np.ndarray:
+    """Finite-difference steps: 1e-4 of the parameter's scale, at most 1e-4 of its range.
+
+    The scale is ``|θ|`` (at least 1 % of the range), so that a wide box (say a
+    precision in ``(0, 10^4)``) does not step across the point's own magnitude.
+    """
+    b = np.asarray(target.bounds, dtype=np.float64)
+    width = b[:, 1] - b[:, 0]
+    if theta is None:
+        return 1e-4 * width
+    return 1e-4 * np.minimum(width, np.maximum(np.abs(theta), 1e-2 * width))
+
+
+def fisher_information(lik: Any, draws: Draws) -> np.ndarray:
+    """``I(θ) = M Cov_k[∇ log f(y_k | θ)]`` (d, d) at the draws' θ (M observations).
+
+    Raises ValueError naming the parameter whose score does not vary (a singular
+    information: every draw at this θ has the same statistic -- e.g. uniform lattices
+    on the coupling's bound -- or the data cannot identify the parameter).
+    """
+    s = _scores(lik, draws, _step(lik, draws.theta))
+    cov = np.atleast_2d(np.cov(s, rowvar=False))
+    M = int(getattr(lik, "n_observations", 1))
+    info = M * cov
+    names = list(lik.param_names)
+    flat = np.flatnonzero(np.diag(info) <= 1e-12 * max(1.0, np.abs(info).max()))
+    if flat.size:
+        raise ValueError(f"the Fisher information is singular at theta {draws.theta.tolist()}: "
+                         f"the score of {names[flat[0]]!r} does not vary over "
+                         f"{draws.y.shape[0]} simulations (the model is degenerate at this "
+                         f"theta, or the data cannot identify the parameter)")
+    w = np.linalg.eigvalsh(info)
+    if w[0] <= 1e-10 * w[-1]:
+        raise ValueError(f"the Fisher information is singular at theta {draws.theta.tolist()} "
+                         f"(condition number {w[-1] / max(w[0], 1e-300):.3g}): some combination "
+                         f"of {names} is not identified by the data")
+    return info

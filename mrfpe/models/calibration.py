@@ -190,6 +190,8 @@ class AdjustedPL(Target):
     Attributes
     ----------
     theta_pl, theta_ml : the MPLE and the adjusted target's centre.
+    bounds : the PL's box narrowed to the bounding box of the parameters that the map
+        ``to_pl`` sends into it (the density is -inf at the others).
     pl_covariance : exp(PL)'s covariance (:func:`mrfpe.models.pl_spread.pl_moments`); its
         sds are the PL posterior's spread in the face test and the Monte Carlo MLE's step
         limit. ``pl_hessian`` (the curvature at the MPLE) is only its importance sampler's
@@ -288,6 +290,14 @@ class AdjustedPL(Target):
                  theta_pl: np.ndarray) -> None:
         self.centre, self.W, self.theta_ml, self.theta_pl = centre, W, theta_ml, theta_pl
         self._offset = float(self.pl._log_prob(theta_pl[None])[0])
+        # the density is -inf where the map leaves the PL's box: narrow the bounds to the
+        # bounding box of the rest, so that a sampler's first draws can find the support
+        A, b = np.linalg.inv(W), np.asarray(self.pl.bounds, dtype=np.float64)
+        ends = A[:, :, None] * (b - centre[:, None])[None]  # (d, d, 2)
+        box = np.stack([theta_ml + ends.min(axis=2).sum(axis=1),
+                        theta_ml + ends.max(axis=2).sum(axis=1)], axis=1)
+        box = np.stack([np.maximum(box[:, 0], b[:, 0]), np.minimum(box[:, 1], b[:, 1])], axis=1)
+        self.bounds = box if np.all(box[:, 0] < box[:, 1]) else b
 
     def _check_interior(self, theta_pl: np.ndarray, sd: np.ndarray) -> None:
         """Refuse an MPLE on the box's face or within one PL sd of it."""

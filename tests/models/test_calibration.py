@@ -148,15 +148,24 @@ def test_the_adjusted_target_has_no_density_where_its_map_leaves_the_pl_box(isin
     formula extrapolated (which on a BRDF scene can exceed the PL's maximum)."""
     m, x, _exact, _lik, pl = ising
     adj = m.target("pl_adjusted", x, seed=2)
-    b = adj.bounds
+    b = pl.bounds
     G = np.stack(np.meshgrid(*[np.linspace(lo, hi, 41) for lo, hi in b], indexing="ij"),
                  -1).reshape(-1, 2)
     z = adj.to_pl(G)
     outside = ~pl.in_bounds(z)
     assert outside.any() and (~outside).any()
-    lp = adj.log_prob(G)
+    lp = adj._log_prob(G)
     assert np.all(lp[outside] == -np.inf)
     np.testing.assert_array_equal(lp[~outside], pl._log_prob(z[~outside]) - adj._offset)
+    # its bounds are the smallest box holding the rest: inside the PL's, and tight
+    inner = G[~outside]
+    assert np.all(adj.bounds[:, 0] >= b[:, 0]) and np.all(adj.bounds[:, 1] <= b[:, 1])
+    assert np.all(adj.in_bounds(inner))
+    # second route: the images of the PL box's corners span the bounding box
+    corners = np.array([[b[0, i], b[1, j]] for i in (0, 1) for j in (0, 1)])
+    images = adj.theta_ml + (corners - adj.centre) @ np.linalg.inv(adj.W).T
+    want = np.stack([np.maximum(images.min(0), b[:, 0]), np.minimum(images.max(0), b[:, 1])], 1)
+    np.testing.assert_allclose(adj.bounds, want, rtol=1e-12, atol=1e-12)
 
 
 def test_a_restored_calibration_is_the_same_target(ising):

@@ -83,6 +83,15 @@ def cloud(post: xr.Dataset, prefix: str) -> dict:
             f"{prefix}_reliable": ((), bool(post.attrs.get("diag_reliable", True)))}
 
 
+def trial_seeds(seed: int) -> tuple[int, int, int]:
+    """The seeds of a trial's exp(PL_s) cloud, calibrated cloud and calibration."""
+    return tuple(int(s) for s in np.random.SeedSequence([seed, 7]).generate_state(3))
+
+
+def trial_path(trials: Path, cell: dict) -> Path:
+    return trials / "brdf={brdf},material={material},specimen={specimen}.nc".format(**cell)
+
+
 def calibrated_pl(scene):
     """The pseudolikelihood that ``pl_adjusted`` with ``prior="range"`` calibrates (its
     default options), for :meth:`~mrfpe.models.calibration.AdjustedPL.restore`."""
@@ -102,7 +111,7 @@ def refresh_adjusted(config: dict, path: Path) -> bool:
     adj = AdjustedPL.restore(calibrated_pl(scene), centre=ds["pl_mean"].values,
                              W=ds["W"].values, theta_ml=ds["theta_adjusted"].values,
                              theta_pl=ds["theta_mple"].values)
-    s_adj = int(np.random.SeedSequence([seed, 7]).generate_state(3)[1])
+    _, s_adj, _ = trial_seeds(seed)
     for name, (dims, value) in cloud(mrfpe.sample("pmc", adj, seed=s_adj, **PMC),
                                      "adjusted").items():
         ds[name] = (dims, value)
@@ -119,7 +128,7 @@ def library_commit() -> str:
 def run_one(config: dict, cell: dict, seed: int,
             shape: tuple[int, int] = SHAPE) -> xr.Dataset:
     scene, u, _ = specimen_scene({**config, **cell}, seed, shape=shape)
-    s_pl, s_adj, s_cal = (int(s) for s in np.random.SeedSequence([seed, 7]).generate_state(3))
+    s_pl, s_adj, s_cal = trial_seeds(seed)
     pl = mrfpe.targets.get(config["target"], scene, **config["target_options"])
     data = cloud(mrfpe.sample("pmc", pl, seed=s_pl, **PMC), "pl")
     attrs: dict = {"cell": json.dumps(cell), "seed": seed, "calibration": json.dumps(CALIBRATION),
@@ -177,8 +186,7 @@ def main() -> None:
     if args.refresh_adjusted:
         head = library_commit()
         for cell, _ in todo:
-            path = args.trials / "brdf={brdf},material={material},specimen={specimen}.nc".format(
-                **cell)
+            path = trial_path(args.trials, cell)
             with xr.open_dataset(path) as ds:
                 if ds.attrs.get("adjusted_sampled_at") == head:
                     continue
@@ -188,7 +196,7 @@ def main() -> None:
                       f"{time.perf_counter() - t0:.0f} s", flush=True)
         return
     for cell, seed in todo:
-        path = args.trials / "brdf={brdf},material={material},specimen={specimen}.nc".format(**cell)
+        path = trial_path(args.trials, cell)
         if path.exists():
             continue
         t0 = time.perf_counter()

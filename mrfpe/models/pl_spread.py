@@ -20,8 +20,9 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy.optimize import brentq
 
-__all__ = ["PLMoments", "hessian", "pl_moments", "start_covariance"]
+__all__ = ["PLMoments", "hessian", "pl_moments", "start_covariance", "tempered_weights"]
 
 
 def hessian(f: Any, theta: np.ndarray, h: np.ndarray) -> np.ndarray:
@@ -78,11 +79,15 @@ def pl_moments(pl: Any, theta: np.ndarray, cov0: np.ndarray, rng: np.random.Gene
 
     Gaussian proposals, 1.5x wider than the current estimate, start at ``N(theta,
     cov0)`` (the Laplace approximation, :func:`start_covariance`) and follow the
-    weighted moments (Cappé et al. 2004's adaptation, one component; a proposal
-    whose ESS is below 10 d is widened fourfold in variance instead) for ``rounds``
+    weighted moments (Cappé et al. 2004's adaptation, one component) for ``rounds``
     rounds, and on while the importance ESS stays below ``n / 10`` (a skewed or
-    curved exp(PL)), up to ``max_rounds``. The last round's moments are refused
-    (``ValueError``) if its ESS is below ``max(50 d, n / 40)``.
+    curved exp(PL)), up to ``max_rounds``. Where fewer than 10 d draws carry the
+    weight, the next proposal follows the moments of the tempered weights ``w**β``,
+    ``β`` chosen so that 10 d draws share them (:func:`tempered_weights`; Korba &
+    Portier 2022): a proposal far too wide then shrinks toward the mode and one too
+    narrow widens, where the untempered moments would collapse onto a few draws.
+    The last round's moments are refused (``ValueError``) if its ESS is below
+    ``max(50 d, n / 40)``.
     """
     mean, cov = np.array(theta, dtype=np.float64), np.array(cov0, dtype=np.float64)
     d = mean.size
@@ -103,18 +108,36 @@ def pl_moments(pl: Any, theta: np.ndarray, cov0: np.ndarray, rng: np.random.Gene
         lw = lp - log_q
         if not np.isfinite(lw.max()):
             raise ValueError(f"the pseudo-posterior's moments could not be estimated: no "
-                             f"importance draw has a finite PL (round {k + 1})")
-        w = np.exp(lw - lw.max())
-        w /= w.sum()
+                             f"importance draw of round {k + 1} has a finite PL (the "
+                             f"proposal, sd {np.sqrt(np.diag(cov)) * 1.5}, has left the "
+                             f"PL's support)")
+        w = tempered_weights(lw, 1.0)
         ess = 1.0 / np.sum(w**2)
+        if ess < 10 * d:  # a few draws carry the weight: their moments would collapse
+            w = tempered_weights(lw, _temperature(lw, 10 * d))
         mean = w @ th
-        if ess >= 10 * d:
-            cov = (th - mean).T @ ((th - mean) * w[:, None])
-        else:  # a few draws carry the weight: their covariance would collapse; widen instead
-            cov = 4.0 * cov
+        cov = (th - mean).T @ ((th - mean) * w[:, None])
         if k + 1 >= rounds and ess >= n / 10:
             break
     if not ess >= max(50 * d, n / 40):
         raise ValueError(f"the pseudo-posterior's moments could not be estimated (importance "
                          f"ESS {ess:.0f} of {n} after {k + 1} rounds)")
     return PLMoments(mean, cov, float(ess), k + 1, best, best_lp)
+
+
+def tempered_weights(log_w: np.ndarray, beta: float) -> np.ndarray:
+    """Normalised ``w**beta`` of log weights ``log_w`` (``-inf`` for none); ``beta = 0``
+    weighs every draw of finite weight alike."""
+    finite = np.isfinite(log_w)
+    w = np.zeros(log_w.shape)
+    w[finite] = np.exp(beta * (log_w[finite] - log_w[finite].max()))
+    return w / w.sum()
+
+
+def _temperature(log_w: np.ndarray, ess: float) -> float:
+    """The ``beta`` in [0, 1] at which the tempered weights' Kish ESS is ``ess`` (0 if
+    fewer draws than that have a finite weight)."""
+    def gap(beta: float) -> float:
+        return 1.0 / np.sum(tempered_weights(log_w, beta) ** 2) - ess
+
+    return 0.0 if gap(0.0) <= 0 else float(brentq(gap, 0.0, 1.0, xtol=1e-6))

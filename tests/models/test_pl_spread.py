@@ -6,7 +6,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mrfpe.models.pl_spread import hessian, pl_moments, start_covariance
+from mrfpe.models.pl_spread import (
+    _temperature,
+    hessian,
+    pl_moments,
+    start_covariance,
+    tempered_weights,
+)
 from mrfpe.targets.base import Target
 
 BOX = np.array([[0.0, 1.0], [0.0, 1.0]])
@@ -74,6 +80,32 @@ def test_a_kinked_log_pl_curvature_is_not_its_spread():
     np.testing.assert_allclose(mom.sd, sd, rtol=0.05)
 
 
+def test_moments_from_a_start_a_hundred_times_too_wide():
+    """A flat curvature at the mode gives the widest start (sd a quarter of the range);
+    exp(PL) a hundred times narrower is still found: the proposal shrinks onto it."""
+    sd = np.array([0.002, 0.0005])
+    mean = np.array([0.62, 0.31])
+
+    def narrow(a, b):  # truncation by the box is negligible: the moments are these
+        return -0.5 * (((a - mean[0]) / sd[0]) ** 2 + ((b - mean[1]) / sd[1]) ** 2)
+
+    start = start_covariance(np.zeros((2, 2)), BOX)
+    np.testing.assert_allclose(np.sqrt(np.diag(start)), 0.25)
+    mom = pl_moments(_Fn(narrow), mean + 0.1, start, np.random.default_rng(4))
+    assert np.all(np.abs(mom.mean - mean) < 0.05 * sd), (mom.mean, mean)
+    np.testing.assert_allclose(mom.sd, sd, rtol=0.05)
+
+
+def test_tempered_weights_share_the_weight_among_the_draws_asked_for():
+    lw = np.concatenate([np.random.default_rng(5).normal(0.0, 30.0, 1000), [-np.inf] * 3])
+    beta = _temperature(lw, 40.0)
+    w = tempered_weights(lw, beta)
+    assert 0.0 < beta < 1.0 and w[-3:].sum() == 0.0
+    np.testing.assert_allclose(1.0 / np.sum(w**2), 40.0, rtol=1e-3)
+    np.testing.assert_allclose(tempered_weights(lw, 0.0)[:-3], 1e-3)
+    assert _temperature(lw, 2000.0) == 0.0  # fewer finite draws than asked for
+
+
 def test_the_best_point_met_reveals_a_higher_mode():
     def spiked(a, b):
         spike = 4.0 * np.exp(-((a - 0.47) ** 2 + (b - 0.6) ** 2) / (2 * 0.001**2))  # 4 % mass
@@ -95,6 +127,6 @@ def test_start_covariance_inverts_a_definite_curvature_and_bounds_the_others():
 
 
 def test_no_finite_draw_is_an_error_not_a_number():
-    with pytest.raises(ValueError, match="no importance draw has a finite PL"):
+    with pytest.raises(ValueError, match="no importance draw of round 1 has a finite PL"):
         pl_moments(_Fn(lambda a, b: np.full(a.shape, -np.inf)), np.array([0.5, 0.5]),
                    np.eye(2) * 1e-4, np.random.default_rng(0))

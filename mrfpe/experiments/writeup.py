@@ -86,8 +86,9 @@ def save_figure(fig: Any, path: Path, dpi: int = 110) -> str:
     return Path(path).name
 
 
-def write_report(out_dir: Path, title: str, sections: Sequence[str]) -> Path:
-    """Write ``out_dir/report.md`` from a title and markdown sections."""
-    path = Path(out_dir) / "report.md"
+def write_report(out_dir: Path, title: str, sections: Sequence[str],
+                 name: str = "report.md") -> Path:
+    """Write ``out_dir/name`` from a title and markdown sections."""
+    path = Path(out_dir) / name
     path.write_text(f"# {title}\n\n" + "\n\n".join(s.strip() for s in sections) + "\n")
     return path

@@ -33,7 +33,7 @@ from mrfpe.models.options import PL_ADJUSTED_OPTIONS
 from mrfpe.targets import reflectance
 from mrfpe.targets.base import Target, as_theta_batch
 from mrfpe.targets.brdf_target import COMMON_OPTIONS
-from mrfpe.targets.options import Option, choice_check, number_check
+from mrfpe.targets.options import Option, choice_check, number_check, resolve_options
 from mrfpe.targets.pseudolikelihood import PL, PL2, PL3, PLS, CompositeMarginalLikelihood, ImageFit
 from mrfpe.validation import check_positive_int
 
@@ -58,6 +58,12 @@ _FIELD_OPTIONS = (
 _LIKELIHOOD_OPTIONS = (*_FIELD_OPTIONS, Option(
     "n_sweeps", "int >= 1", DEFAULT_SWEEPS, lambda n, v: check_positive_int(n, v),
     "Gibbs sweeps per auxiliary draw"))
+
+
+def _joint_pl(scene: Any, field: dict[str, Any]) -> Target:
+    cls, extra = {"none": (PL, {}), "range": (PLS, {"prior_weight": field["prior_weight"]}),
+                  "beliefs": (PL3, {"temperature": field["temperature"]})}[field["prior"]]
+    return cls(scene, sigma_b=field["sigma_b"], data_term=field["data_term"], **extra)
 
 
 class BRDFLikelihood(Target):
@@ -194,12 +200,24 @@ class BRDFModel(Model):
             return lik
         from mrfpe.models.calibration import AdjustedPL
 
-        # the pseudolikelihood whose conditionals are the joint's (pl, pls or pl3)
-        prior = field["prior"]
-        cls, extra = {"none": (PL, {}), "range": (PLS, {"prior_weight": field["prior_weight"]}),
-                      "beliefs": (PL3, {"temperature": field["temperature"]})}[prior]
-        pl = cls(scene, sigma_b=field["sigma_b"], data_term=field["data_term"], **extra)
-        return AdjustedPL(pl, lik, **options)
+        field.pop("n_sweeps")
+        return AdjustedPL(_joint_pl(scene, field), lik, **options)
+
+    def joint_pl(self, scene: Any, /, **options: Any) -> Target:
+        """The pseudolikelihood whose conditionals are those of the simulated joint
+        p(x | theta): ``pl``, ``pls`` or ``pl3`` per ``prior`` (the PL ``"pl_adjusted"``
+        calibrates, e.g. for :meth:`mrfpe.models.calibration.AdjustedPL.restore`).
+
+        Parameters
+        ----------
+        scene : mrfpe.scene.Scene
+        **options
+            The joint's options, with the defaults of ``"likelihood"`` and
+            ``"pl_adjusted"``: ``sigma_b``, ``data_term``, ``prior``, ``prior_weight``,
+            ``temperature``.
+        """
+        return _joint_pl(scene, resolve_options(f"{self.name} joint_pl", _FIELD_OPTIONS,
+                                                options))
 
     def param_names(self, brdf: str = "ward") -> tuple[str, ...]:
         """Unit-cube parameters of the scene's BRDF model (``"ward"`` or ``"phong"``)."""

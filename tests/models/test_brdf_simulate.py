@@ -52,6 +52,19 @@ TARGETS = {"none": (PL, {}), "range": (PLS, {"prior_weight": 0.7}),
            "beliefs": (PL3, {"temperature": 1.5})}
 
 
+@pytest.mark.parametrize("prior", ["none", "range", "beliefs"])
+def test_joint_pl_is_the_pseudolikelihood_of_the_prior(prior):
+    """``BRDFModel.joint_pl`` (the PL that pl_adjusted calibrates) is ``pl``/``pls``/``pl3``."""
+    sc = _scene("ward")
+    cls, opts = TARGETS[prior]
+    got = get("brdf").joint_pl(sc, prior=prior, sigma_b=SIGMA, **opts)
+    assert type(got) is cls
+    th = np.random.default_rng(2).random((4, 3))
+    np.testing.assert_array_equal(got.log_prob(th), cls(sc, sigma_b=SIGMA, **opts).log_prob(th))
+    with pytest.raises(ValueError, match="valid options"):
+        get("brdf").joint_pl(sc, n_sweeps=3)  # a chain option, not the joint's
+
+
 @pytest.mark.parametrize("brdf", ["ward", "phong"])
 @pytest.mark.parametrize("prior", ["none", "range", "beliefs"])
 def test_energy_differences_are_the_pseudolikelihood_conditionals(brdf, prior):

@@ -10,6 +10,9 @@ systematic resampling (the size of the classification study's sets; exact EMD be
 4000-point sets would take hours), or from the normal with a target's own moments.
 
     python docs/results/calibrated_classification/report.py [--jobs 2]
+    python docs/results/calibrated_classification/report.py --jobs 2 \
+        --trials docs/results/calibrated_classification/trials_100x100 \
+        --report docs/results/calibrated_classification/report_100x100.md
 """
 
 from __future__ import annotations
@@ -158,6 +161,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--jobs", type=int, default=1, help="processes for the pair loops")
     ap.add_argument("--trials", type=Path, default=HERE / "trials", help="the trial files")
+    ap.add_argument("--report", type=Path, default=HERE / "report.md", help="the page written")
     args = ap.parse_args()
     trials = load(args.trials)
     sections = []
@@ -184,7 +188,8 @@ def main() -> None:
             f"{np.median(cost[:, 1]):.0f} simulation sweeps, autocorrelation time "
             f"{np.median(cost[:, 2]):.1f} [{cost[:, 2].min():.1f}, {cost[:, 2].max():.1f}] "
             f"sweeps, Monte Carlo MLE rounds {np.median(cost[:, 3]):.0f}. Kish ESS of the "
-            f"clouds (median of 1000 particles): exp(PL_s) {ess_pl:.0f}, calibrated "
+            f"clouds (median, of {both[0].sizes['sample']} particles): exp(PL_s) {ess_pl:.0f}, "
+            f"calibrated "
             f"{ess_adj:.0f}; PMC runs flagged unreliable: {unreliable} of {2 * len(both)}.\n\n"
             "What calibration changed, per parameter (median [min, max] over specimens), "
             "measured on the targets themselves: the centre's move in exp(PL_s) sd, the sd "
@@ -200,7 +205,8 @@ def main() -> None:
             + "\n\nTrue parameters within 2 sd of the centre in every parameter: "
             "exp(PL_s) {} of {n}, calibrated {} of {n}.".format(*covered(both), n=len(both))
             + "\n\nClassification: " + classification(both, args.jobs))
-    write_report(HERE, "Classification with calibrated posteriors", sections)
+    write_report(args.report.parent, "Classification with calibrated posteriors", sections,
+                 name=args.report.name)
 
 
 if __name__ == "__main__":

@@ -92,12 +92,6 @@ def trial_path(trials: Path, cell: dict) -> Path:
     return trials / "brdf={brdf},material={material},specimen={specimen}.nc".format(**cell)
 
 
-def calibrated_pl(scene):
-    """The pseudolikelihood that ``pl_adjusted`` with ``prior="range"`` calibrates (its
-    default options), for :meth:`~mrfpe.models.calibration.AdjustedPL.restore`."""
-    return mrfpe.targets.get("pls", scene, sigma_b="auto", data_term="pixel", prior_weight=1.0)
-
-
 def refresh_adjusted(config: dict, path: Path) -> bool:
     """Sample a trial's calibrated target again from its saved calibration (the map
     ``pl_mean``, ``W``, ``theta_adjusted``, ``theta_mple``), without simulating; False if
@@ -108,8 +102,10 @@ def refresh_adjusted(config: dict, path: Path) -> bool:
     cell, seed = json.loads(ds.attrs["cell"]), int(ds.attrs["seed"])
     scene, _, _ = specimen_scene({**config, **cell}, seed, shape=tuple(json.loads(
         ds.attrs["shape"])))
-    adj = AdjustedPL.restore(calibrated_pl(scene), centre=ds["pl_mean"].values,
-                             W=ds["W"].values, theta_ml=ds["theta_adjusted"].values,
+    # the PL that pl_adjusted(prior="range") calibrated, mapped as it was saved
+    pl = mrfpe.models.get("brdf").joint_pl(scene, prior="range")
+    adj = AdjustedPL.restore(pl, centre=ds["pl_mean"].values, W=ds["W"].values,
+                             theta_ml=ds["theta_adjusted"].values,
                              theta_pl=ds["theta_mple"].values)
     _, s_adj, _ = trial_seeds(seed)
     for name, (dims, value) in cloud(mrfpe.sample("pmc", adj, seed=s_adj, **PMC),

@@ -434,6 +434,11 @@ class Prose:
         boot = self._m("bootstrap")
         at_bound = sum(1 for b in boot if b["q95"][1] >= 3 - 1e-9 or b["q05"][1] <= -3 + 1e-9
                        or b["q95"][0] >= 2 - 1e-9 or b["q05"][0] <= -2 + 1e-9)
+        flag_ad = sum(1 for a in ad if not a.get("diag_reliable"))
+        ad_head = ("met in every case, at the critical coupling only just" if not flag_ad else
+                   f"within its numbers in every case, at the critical coupling only just, "
+                   f"but {flag_ad} of its {len(ad)} runs call{'s' * (flag_ad == 1)} {'itself' if flag_ad == 1 else 'themselves'} "
+                   f"unreliable (the table above counts the case as missed)")
         flag_text = ("Every run calls itself reliable, so the target is **met in every case**."
                      if not flagged else
                      f"{flagged} of the {n} runs call themselves unreliable (below), so the "
@@ -448,8 +453,7 @@ In plain words:
   posterior's {cov_exact}; in the {n_diff} (data set, parameter) pairs where the two disagree
   the truth lies within {near:.2f} exact sd
   of an end of both intervals. {flag_text}
-- **PMC on the adjusted PL (default options): met in every case, at the critical coupling
-  only just.** It builds on {len(ad)} of {sum(map(len, self.by_case.values()))} data sets ({failed_c} failures
+- **PMC on the adjusted PL (default options): {ad_head}.** It builds on {len(ad)} of {sum(map(len, self.by_case.values()))} data sets ({failed_c} failures
   at the critical coupling); its mean is within 0.3 exact sd of the exact mean in
   {len(ad) - over} of {len(ad)} data sets (mean |z| {zad_lo:.2f}–{zad_hi:.2f} per case), and its
   median sd ratio is {rad_lo:.2f}–{rad_hi:.2f}. At the critical coupling the field's median sd

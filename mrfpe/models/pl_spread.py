@@ -112,10 +112,10 @@ def pl_moments(pl: Any, theta: np.ndarray, cov0: np.ndarray, rng: np.random.Gene
             best, best_lp = th[top].copy(), float(lp[top])
         lw = lp - log_q
         if not np.isfinite(lw.max()):
+            sd = (1.5 * np.sqrt(np.diag(cov))).round(4).tolist()
             raise ValueError(f"the pseudo-posterior's moments could not be estimated: no "
                              f"importance draw of round {k + 1} has a finite PL (the "
-                             f"proposal, sd {np.sqrt(np.diag(cov)) * 1.5}, has left the "
-                             f"PL's support)")
+                             f"proposal, sd {sd}, has left the PL's support)")
         w = tempered_weights(lw, 1.0)
         ess = 1.0 / np.sum(w**2)
         if ess < 10 * d:  # a few draws carry the weight: their moments would collapse

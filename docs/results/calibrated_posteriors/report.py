@@ -435,10 +435,11 @@ class Prose:
         at_bound = sum(1 for b in boot if b["q95"][1] >= 3 - 1e-9 or b["q05"][1] <= -3 + 1e-9
                        or b["q95"][0] >= 2 - 1e-9 or b["q05"][0] <= -2 + 1e-9)
         flag_ad = sum(1 for a in ad if not a.get("diag_reliable"))
+        calls = "calls itself" if flag_ad == 1 else "call themselves"
         ad_head = ("met in every case, at the critical coupling only just" if not flag_ad else
                    f"within its numbers in every case, at the critical coupling only just, "
-                   f"but {flag_ad} of its {len(ad)} runs call{'s' * (flag_ad == 1)} {'itself' if flag_ad == 1 else 'themselves'} "
-                   f"unreliable (the table above counts the case as missed)")
+                   f"but {flag_ad} of its {len(ad)} runs {calls} unreliable (the table above "
+                   f"counts the case as missed)")
         flag_text = ("Every run calls itself reliable, so the target is **met in every case**."
                      if not flagged else
                      f"{flagged} of the {n} runs call themselves unreliable (below), so the "

@@ -23,6 +23,8 @@ import numpy as np
 from scipy.optimize import brentq
 from scipy.stats import multivariate_normal, multivariate_t
 
+from mrfpe.resampling import ess, normalise_log_weights
+
 __all__ = ["DEFENSIVE_SCALE", "DEFENSIVE_WEIGHT", "PLMoments", "hessian", "pl_moments",
            "start_covariance", "tempered_weights"]
 
@@ -116,18 +118,17 @@ def pl_moments(pl: Any, theta: np.ndarray, cov0: np.ndarray, rng: np.random.Gene
             raise ValueError(f"the pseudo-posterior's moments could not be estimated: no "
                              f"importance draw of round {k + 1} has a finite PL (the "
                              f"proposal, sd {sd}, has left the PL's support)")
-        w = tempered_weights(lw, 1.0)
-        ess = 1.0 / np.sum(w**2)
-        if ess < 10 * d:  # a few draws carry the weight: their moments would collapse
-            w = tempered_weights(lw, _temperature(lw, 10 * d))
+        n_eff = ess(lw)
+        # a few draws carry the weight: their moments would collapse, so temper them
+        w = tempered_weights(lw, 1.0 if n_eff >= 10 * d else _temperature(lw, 10 * d))
         mean = w @ th
         cov = (th - mean).T @ ((th - mean) * w[:, None])
-        if k + 1 >= rounds and ess >= n / 10:
+        if k + 1 >= rounds and n_eff >= n / 10:
             break
-    if not ess >= max(50 * d, n / 40):
+    if not n_eff >= max(50 * d, n / 40):
         raise ValueError(f"the pseudo-posterior's moments could not be estimated (importance "
-                         f"ESS {ess:.0f} of {n} after {k + 1} rounds)")
-    return PLMoments(mean, cov, float(ess), k + 1, best, best_lp)
+                         f"ESS {n_eff:.0f} of {n} after {k + 1} rounds)")
+    return PLMoments(mean, cov, float(n_eff), k + 1, best, best_lp)
 
 
 def _defensive_draws(mean: np.ndarray, cov: np.ndarray, n: int,
@@ -151,16 +152,18 @@ def _defensive_draws(mean: np.ndarray, cov: np.ndarray, n: int,
 def tempered_weights(log_w: np.ndarray, beta: float) -> np.ndarray:
     """Normalised ``w**beta`` of log weights ``log_w`` (``-inf`` for none); ``beta = 0``
     weighs every draw of finite weight alike."""
-    finite = np.isfinite(log_w)
-    w = np.zeros(log_w.shape)
-    w[finite] = np.exp(beta * (log_w[finite] - log_w[finite].max()))
-    return w / w.sum()
+    return np.exp(normalise_log_weights(_tempered(log_w, beta)))
 
 
-def _temperature(log_w: np.ndarray, ess: float) -> float:
-    """The ``beta`` in [0, 1] at which the tempered weights' Kish ESS is ``ess`` (0 if
-    fewer draws than that have a finite weight)."""
+def _tempered(log_w: np.ndarray, beta: float) -> np.ndarray:
+    finite = np.isfinite(log_w)  # -inf stays -inf at beta = 0 (not 0 * -inf = NaN)
+    return np.where(finite, beta * np.where(finite, log_w, 0.0), -np.inf)
+
+
+def _temperature(log_w: np.ndarray, target_ess: float) -> float:
+    """The ``beta`` in [0, 1] at which the tempered weights' Kish ESS is ``target_ess``
+    (0 if fewer draws than that have a finite weight)."""
     def gap(beta: float) -> float:
-        return 1.0 / np.sum(tempered_weights(log_w, beta) ** 2) - ess
+        return ess(_tempered(log_w, beta)) - target_ess
 
     return 0.0 if gap(0.0) <= 0 else float(brentq(gap, 0.0, 1.0, xtol=1e-6))

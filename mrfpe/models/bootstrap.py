@@ -14,6 +14,7 @@ import numpy as np
 
 from mrfpe.models.draws import simulate_draws
 from mrfpe.targets.maximise import maximise
+from mrfpe.validation import check_positive_int
 
 __all__ = ["parametric_bootstrap"]
 
@@ -29,11 +30,22 @@ def parametric_bootstrap(model: Any, data: Any, *, n_boot: int = 200, estimator:
     (a simulated data set without information on a parameter, e.g. a uniform lattice
     near the critical coupling) are marked in the variable ``on_face`` and named in
     the posterior's ``bias`` attribute and diagnostics.
+
+    The refits need data sets the model can simulate: a model whose data are a scene
+    (the BRDF MRF draws the labels of a fixed image, not images) is refused, as is an
+    ``n_boot`` that is not a positive integer, before any fit.
     """
     from mrfpe.posterior import build
 
+    n_boot = check_positive_int("n_boot", n_boot)
     rng = np.random.default_rng(seed)
     target = model.target(estimator, data, **options)
+    if getattr(target, "data_kind", "data") == "scene":
+        raise ValueError(f"parametric_bootstrap refits {estimator!r} on data sets simulated at "
+                         f"the estimate, and model {getattr(model, 'name', model)!r} simulates "
+                         f"the labels of a fixed scene, not scenes: bootstrap its label-field "
+                         f"estimators elsewhere, or use 'pl_adjusted' or the exchange sampler "
+                         f"for a calibrated posterior")
     grid = max(3, int(4096 ** (1 / target.ndim)))
     theta_hat, value = maximise(target, grid=grid, seed=int(rng.integers(2**31)))
     lik = model.target("likelihood", data, **{k: v for k, v in options.items()

@@ -33,9 +33,10 @@ vary); and the draws must come from a chain that has mixed (their number, burn-i
 and thinning follow the measured autocorrelation time, :mod:`mrfpe.models.mixing`).
 The PL posterior's spread is taken from its moments, not from its curvature at the
 MPLE, which a kinked log PL (a BRDF scene's absolute-difference data terms) makes far
-too large (:mod:`mrfpe.models.pl_spread`). It keeps exp(PL)'s far modes: a second mode
-the moments' importance sampler did not meet is mapped along, not calibrated (sample
-the adjusted target with PMC and compare its cloud with the moments it promises).
+too large (:mod:`mrfpe.models.pl_spread`). A second mode of exp(PL) is mapped along by
+the one affine map, not calibrated; one that the moments' importance sampler (started
+at the MPLE) never met does not even enter the moments, unless they are taken from a
+global sample of exp(PL) (``pl_sample``, e.g. PMC annealed from the box).
 """
 
 from __future__ import annotations
@@ -45,6 +46,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import xarray as xr
 from scipy.optimize import minimize
 from scipy.special import logsumexp
 
@@ -56,7 +58,13 @@ from mrfpe.models.draws import (
     fisher_information,
     simulate_draws,
 )
-from mrfpe.models.pl_spread import hessian, pl_moments, start_covariance
+from mrfpe.models.pl_spread import (
+    PLMoments,
+    hessian,
+    pl_moments,
+    sample_moments,
+    start_covariance,
+)
 from mrfpe.targets.base import Target, as_theta_batch
 from mrfpe.targets.maximise import maximise
 
@@ -186,6 +194,14 @@ class AdjustedPL(Target):
         (:func:`simulate_draws`); it is at least 50 τ long whatever this says.
     seed : int
         Every simulation flows from it.
+    pl_sample : posterior Dataset, optional
+        A sample of exp(PL) (a sampler's result on ``pl``, e.g. PMC's, which anneals
+        from the whole box): exp(PL)'s mean and covariance are its weighted ones
+        (:func:`mrfpe.models.pl_spread.sample_moments`, which refuses an unreliable
+        sample or one of another PL) instead of the importance sampler's from the
+        MPLE. Give it where exp(PL) may have mass far from its mode: the importance
+        sampler does not meet a mode tens of its sds away, and the calibration then
+        maps the near mode's moments only.
 
     Attributes
     ----------
@@ -203,7 +219,7 @@ class AdjustedPL(Target):
 
     def __init__(self, pl: Any, lik: Any, *, mode: str = "mcmc_mle", align: str = "moments",
                  n_draws: int = 1000, max_rounds: int = 10, pilot_sweeps: int = 2000,
-                 seed: int = 0) -> None:
+                 seed: int = 0, pl_sample: xr.Dataset | None = None) -> None:
         self._set_pl(pl)
         self.lik = lik
         if mode not in ("mcmc_mle", "mple"):
@@ -212,6 +228,7 @@ class AdjustedPL(Target):
             raise ValueError(f"align must be 'mode' or 'moments'; got {align!r}")
         self.mode, self.align = mode, align
         self.mle = None
+        given = None if pl_sample is None else sample_moments(pl, pl_sample)  # before the work
         b = self.bounds
         # a grid of at most ~4096 points whatever the dimension, then the local polish
         theta_pl, lp_pl = maximise(pl, grid=max(3, int(4096 ** (1 / b.shape[0]))), seed=seed)
@@ -219,15 +236,7 @@ class AdjustedPL(Target):
         H = self._curvature(theta_pl)
         rng = np.random.default_rng(seed)
         s_mle = int(rng.integers(2**63))
-        try:
-            mom = pl_moments(pl, theta_pl, start_covariance(H, b), rng)
-        except ValueError as err:
-            if align == "moments":
-                raise ValueError(f"{err}: exp(PL) is far from one Gaussian (a curved ridge "
-                                 f"or several modes), which the moment alignment cannot map; "
-                                 f"align='mode' calibrates the curvature at the MPLE only, and "
-                                 f"PMC on exp(PL) shows its shape") from None
-            mom = None
+        mom = given if given is not None else _pl_moments(pl, theta_pl, H, rng, align)
         if mom is not None and mom.best_log_prob > lp_pl + 1e-3:  # the maximiser stopped short
             theta_pl, lp_pl = maximise(pl, grid=np.stack([theta_pl, mom.best_theta]), n_starts=2)
             H = self._curvature(theta_pl)
@@ -263,6 +272,7 @@ class AdjustedPL(Target):
         self._set_map(centre, W, theta_ml, theta_pl)
         self.fisher_information, self.pl_hessian, self.pl_covariance = info, H, pl_cov
         self.n_simulation_sweeps = int(sims)
+        self.pl_moments_from = "sample" if pl_sample is not None else "importance"
 
     @classmethod
     def restore(cls, pl: Any, *, centre: Any, W: Any, theta_ml: Any,
@@ -273,7 +283,7 @@ class AdjustedPL(Target):
         (``fisher_information``, ``mle``, ``pl_covariance``, ...) are not restored."""
         self = cls.__new__(cls)
         self._set_pl(pl)
-        self.lik = self.mode = self.align = self.mle = None
+        self.lik = self.mode = self.align = self.mle = self.pl_moments_from = None
         self.fisher_information = self.pl_hessian = self.pl_covariance = None
         self.n_simulation_sweeps = 0
         self._set_map(*(np.array(v, dtype=np.float64) for v in (centre, W, theta_ml, theta_pl)))
@@ -347,7 +357,23 @@ class AdjustedPL(Target):
                 "estimator": "pl_adjusted", "mode": self.mode, "align": self.align,
                 "theta_mple": self.theta_pl.tolist(), "theta_mode": self.theta_ml.tolist(),
                 "centre": self.centre.tolist(), "W": self.W.tolist(),
-                "n_simulation_sweeps": self.n_simulation_sweeps}
+                "n_simulation_sweeps": self.n_simulation_sweeps,
+                "pl_moments_from": self.pl_moments_from}
+
+
+def _pl_moments(pl: Any, theta_pl: np.ndarray, H: np.ndarray, rng: np.random.Generator,
+                align: str) -> PLMoments | None:
+    """exp(PL)'s moments importance-sampled from the MPLE (None where that fails and
+    ``align="mode"`` does not need them)."""
+    try:
+        return pl_moments(pl, theta_pl, start_covariance(H, np.asarray(pl.bounds, float)), rng)
+    except ValueError as err:
+        if align == "moments":
+            raise ValueError(f"{err}: exp(PL) is far from one Gaussian (a curved ridge "
+                             f"or several modes), which the moment alignment cannot map; "
+                             f"align='mode' calibrates the curvature at the MPLE only, and "
+                             f"PMC on exp(PL) shows its shape") from None
+        return None
 
 
 def _skew_shift(lik: Any, draws: Draws, info: np.ndarray) -> np.ndarray:

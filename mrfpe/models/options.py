@@ -8,18 +8,23 @@ thing, and are checked the same way, for every model.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping, Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
+import xarray as xr
 
 from mrfpe.models.graph import Graph
+from mrfpe.posterior import load, validate
 from mrfpe.targets.options import Option, choice_check, optional
 from mrfpe.validation import check_positive_int
 
 __all__ = ["CODING_OPTION", "COMMON_OPTIONS", "PL_ADJUSTED_OPTIONS", "adjusted_options",
            "block_option", "block_option_spec", "bounds_option", "coding_nodes",
-           "covariates_option", "jsonable", "node_blocks", "nonneg_int"]
+           "covariates_option", "jsonable", "node_blocks", "nonneg_int",
+           "posterior_option"]
 
 
 def covariates_option(name: str, value: Any) -> Any:
@@ -47,6 +52,23 @@ def bounds_option(name: str, value: Any) -> Any:
         raise ValueError(f"{name} must be a finite (d, 2) array with lower < upper, or a mapping "
                          f"name -> (low, high); got {np.asarray(value).tolist()!r:.80}")
     return b
+
+
+def posterior_option(name: str, value: Any) -> xr.Dataset:
+    """A posterior Dataset (:func:`mrfpe.posterior.validate`), or the path of a netCDF file
+    :func:`mrfpe.posterior.save` wrote."""
+    if isinstance(value, str | os.PathLike):
+        if not Path(value).is_file():
+            raise ValueError(f"{name}: no posterior file at {str(value)!r}")
+        value = load(value)
+    if not isinstance(value, xr.Dataset):
+        raise ValueError(f"{name} must be a posterior Dataset (a sampler's result) or the path "
+                         f"of one saved as netCDF; got {type(value).__name__}")
+    try:
+        validate(value)
+    except (ValueError, TypeError) as err:
+        raise ValueError(f"{name} is not a valid posterior: {err}") from None
+    return value
 
 
 def nonneg_int(name: str, value: Any) -> int:
@@ -101,6 +123,9 @@ PL_ADJUSTED_OPTIONS: tuple[Option, ...] = (
            lambda n, v: check_positive_int(n, v, minimum=250),
            "shortest pilot chain measuring the simulator's autocorrelation time"),
     Option("seed", "int >= 0", 0, nonneg_int, "seed of every simulation of the calibration"),
+    Option("pl_sample", "posterior Dataset | netCDF path | None", None, optional(posterior_option),
+           "a sample of exp(PL) (e.g. PMC on the PL target) whose moments are calibrated, "
+           "instead of those importance-sampled from the MPLE"),
 )
 
 

@@ -12,6 +12,12 @@ times narrower than exp(PL)'s own (PMC's weighted sd, which agreed with
 :func:`pl_moments` to a median ratio of 1.0), and on two scenes ``H`` was not
 even negative definite. So the spread is estimated from exp(PL)'s moments
 (:func:`pl_moments`), with the curvature as the importance sampler's start.
+
+That sampler starts at the MPLE and meets what its heavy-tailed component reaches; a
+mode of exp(PL) tens of sds away it may never meet, and its moments are then the near
+mode's. A global sample of exp(PL) (PMC annealed from the whole box) sees such modes:
+:func:`sample_moments` takes the moments from it instead, after checking that it is a
+reliable sample of the same PL.
 """
 
 from __future__ import annotations
@@ -20,13 +26,16 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import xarray as xr
 from scipy.optimize import brentq
 from scipy.stats import multivariate_normal, multivariate_t
 
+from mrfpe.models.options import posterior_option
+from mrfpe.posterior import stored_messages, weighted_cov, weighted_mean
 from mrfpe.resampling import ess, normalise_log_weights
 
 __all__ = ["DEFENSIVE_SCALE", "DEFENSIVE_WEIGHT", "PLMoments", "hessian", "pl_moments",
-           "start_covariance", "tempered_weights"]
+           "sample_moments", "start_covariance", "tempered_weights"]
 
 #: Weight of :func:`pl_moments`'s heavy-tailed defensive component.
 DEFENSIVE_WEIGHT = 0.1
@@ -129,6 +138,48 @@ def pl_moments(pl: Any, theta: np.ndarray, cov0: np.ndarray, rng: np.random.Gene
         raise ValueError(f"the pseudo-posterior's moments could not be estimated (importance "
                          f"ESS {n_eff:.0f} of {n} after {k + 1} rounds)")
     return PLMoments(mean, cov, float(n_eff), k + 1, best, best_lp)
+
+
+def sample_moments(pl: Any, post: xr.Dataset, *, name: str = "pl_sample") -> PLMoments:
+    """exp(PL)'s mean and covariance from a weighted sample of it: ``post``, a sampler's
+    posterior on ``pl`` (e.g. PMC, whose annealing starts from the whole box and so
+    meets modes far from the MPLE).
+
+    The sample is refused (``ValueError`` naming ``name``) unless it is a valid posterior
+    of draws (not optima) over ``pl``'s parameters that does not flag itself unreliable,
+    with a Kish ESS of at least 50 d, and unless ``pl`` reproduces its stored
+    ``log_target`` up to a constant at its heaviest particles (so that it is a sample of
+    *this* PL, not of another scene's or a tempered one). ``rounds`` is 0; the best point
+    is the heaviest particles' highest-PL one.
+    """
+    posterior_option(name, post)
+    names = tuple(str(p) for p in post["param"].values)
+    if names != tuple(pl.param_names):
+        raise ValueError(f"{name} must be over the PL's parameters {list(pl.param_names)}; "
+                         f"got {list(names)}")
+    if post.attrs.get("kind", "draws") != "draws":
+        raise ValueError(f"{name} must be a sample of exp(PL) (kind 'draws'); got kind "
+                         f"{post.attrs['kind']!r} (a multi-start optimiser's optima)")
+    if not bool(post.attrs.get("diag_reliable", True)):
+        raise ValueError(f"{name} flags itself unreliable ({' '.join(stored_messages(post))}): "
+                         f"its moments would be noise; sample exp(PL) again as it suggests")
+    d, n_eff = len(names), ess(post)
+    if n_eff < 50 * d:
+        raise ValueError(f"{name} has a Kish ESS of {n_eff:.0f}, below the {50 * d} (50 per "
+                         f"parameter) its covariance needs")
+    lw, lt = post["log_weight"].values, post["log_target"].values
+    top = np.argsort(-np.where(np.isfinite(lw), lw, -np.inf))[:32]
+    theta = post["theta"].values
+    lp = np.asarray(pl.log_prob(theta[top]), dtype=np.float64)
+    gap = lp - lt[top]
+    scale = 1e-6 * max(1.0, float(np.max(np.abs(lp[np.isfinite(lp)]), initial=0.0)))
+    if not np.all(np.isfinite(gap)) or np.ptp(gap) > scale:
+        raise ValueError(f"{name} is not a sample of this PL: at its heaviest particles the "
+                         f"PL's log density differs from the stored log_target by more than a "
+                         f"constant (spread {np.ptp(gap):.3g}); sample this target's PL")
+    best = int(np.argmax(lp))
+    return PLMoments(weighted_mean(post), weighted_cov(post), float(n_eff), 0,
+                     theta[top[best]].copy(), float(lp[best]))
 
 
 def _defensive_draws(mean: np.ndarray, cov: np.ndarray, n: int,

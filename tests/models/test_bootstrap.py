@@ -1,11 +1,14 @@
-"""Parametric bootstrap of the MPLE: the posterior schema, and refits on the box's face."""
+"""Parametric bootstrap of the MPLE: the posterior schema, refits on the box's face, and
+what it refuses."""
 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from mrfpe import models
 from mrfpe.models.bootstrap import parametric_bootstrap
+from mrfpe.synthetic import make_scene
 
 
 def test_parametric_bootstrap_schema_and_spread():
@@ -30,3 +33,14 @@ def test_parametric_bootstrap_flags_refits_on_the_box_face():
     np.testing.assert_array_equal(boot["on_face"].values, by_hand)
     assert f"{by_hand.sum()} of 20 refits lie on the box's face" in boot.attrs["bias"]
     assert not boot.attrs["diag_reliable"]
+
+
+def test_parametric_bootstrap_refuses_what_it_cannot_refit_before_fitting():
+    m = models.ising()
+    x = m.simulate([0.3, 0.05], shape=(8, 8), seed=1, n_sweeps=300)
+    for bad in (0, -2, 2.5, True):
+        with pytest.raises(ValueError, match=r"n_boot must be an integer >= 1"):
+            parametric_bootstrap(m, x, n_boot=bad)
+    scene = make_scene(brdf="phong", theta=[0.5, 0.4, 8.0], shape=(6, 7), n_labels=5, seed=3)
+    with pytest.raises(ValueError, match=r"simulates the labels of a fixed scene"):
+        parametric_bootstrap(models.get("brdf"), scene, n_boot=5)

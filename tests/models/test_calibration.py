@@ -6,7 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+import mrfpe
 from mrfpe import models
+from mrfpe.models import calibration
 from mrfpe.models.calibration import (
     AdjustedPL,
     _step,
@@ -15,6 +17,7 @@ from mrfpe.models.calibration import (
     mcmc_mle,
     simulate_draws,
 )
+from mrfpe.posterior import PosteriorWarning, build, weighted_cov, weighted_mean
 from mrfpe.targets import maximise
 from mrfpe.targets.base import Target
 
@@ -177,3 +180,51 @@ def test_a_restored_calibration_is_the_same_target(ising):
     G = adj.theta_ml + np.random.default_rng(0).normal(0.0, 0.2, (200, 2))
     np.testing.assert_array_equal(again.log_prob(G), adj.log_prob(G))
     assert again.fisher_information is None and again.param_names == adj.param_names
+
+
+def test_a_sample_of_exp_pl_gives_the_moments_it_calibrates(ising, tmp_path):
+    m, x, _exact, _lik, pl = ising
+    post = mrfpe.sample("pmc", pl, seed=0, n_samples=2000)
+    adj = m.target("pl_adjusted", x, seed=2, pl_sample=post)
+    np.testing.assert_array_equal(adj.centre, weighted_mean(post))
+    np.testing.assert_array_equal(adj.pl_covariance, weighted_cov(post))
+    assert adj.describe()["pl_moments_from"] == "sample"
+    path = tmp_path / "pl.nc"
+    mrfpe.posterior.save(post, path)  # or the file a sampler's result was saved to
+    again = m.target("pl_adjusted", x, seed=2, pl_sample=str(path))
+    np.testing.assert_array_equal(again.centre, adj.centre)
+    np.testing.assert_array_equal(again.W, adj.W)
+    # on this unimodal exp(PL) the importance sampler from the MPLE agrees with it
+    own = m.target("pl_adjusted", x, seed=2)
+    assert own.describe()["pl_moments_from"] == "importance"
+    sd = np.sqrt(np.diag(own.pl_covariance))
+    assert np.all(np.abs(adj.centre - own.centre) < 0.1 * sd)
+    np.testing.assert_allclose(np.sqrt(np.diag(adj.pl_covariance)), sd, rtol=0.1)
+
+
+def test_a_sample_it_cannot_trust_is_refused_before_any_work(ising, monkeypatch):
+    m, x, _exact, _lik, pl = ising
+    post = mrfpe.sample("pmc", pl, seed=0, n_samples=2000)
+    # sixty draws whose sampler called them reliable: too few for a covariance all the same
+    with pytest.warns(PosteriorWarning):
+        few = build(post["theta"].values[:60], post["log_target"].values[:60],
+                    param_names=pl.param_names, sampler="test", target=pl)
+    few = few.assign_attrs(diag_reliable=1, diag_messages="")
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("the PL was maximised before the sample was checked")
+
+    monkeypatch.setattr(calibration, "maximise", no_work)
+    other = m.simulate([0.3, 0.05], shape=(8, 8), seed=2, n_sweeps=300)
+    bad = {
+        "not a sample of this PL": (other, post),
+        "unreliable": (x, post.assign_attrs(diag_reliable=0, diag_messages="ESS 3 < 100")),
+        "kind 'draws'": (x, post.assign_attrs(kind="optima")),
+        r"Kish ESS of \d+, below the 100": (x, few),
+        "must be over the PL's parameters": (x, post.assign_coords(param=["a", "b"])),
+        "must be a posterior Dataset": (x, weighted_mean(post)),
+        "no posterior file at": (x, "no/such/file.nc"),
+    }
+    for message, (data, sample) in bad.items():
+        with pytest.raises(ValueError, match=f"pl_sample.*{message}|{message}.*"):
+            m.target("pl_adjusted", data, pl_sample=sample, pilot_sweeps=250, n_draws=10)

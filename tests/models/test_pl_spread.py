@@ -6,10 +6,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+import mrfpe
 from mrfpe.models.pl_spread import (
     _temperature,
     hessian,
     pl_moments,
+    sample_moments,
     start_covariance,
     tempered_weights,
 )
@@ -113,6 +115,36 @@ def test_a_far_mode_the_start_never_meets_is_counted():
     # the near mode alone is 0.44 sd off in the mean and 0.2x in the sds
     assert np.all(np.abs(mom.mean - mean) < 0.1 * sd), (mom.mean, mean)
     np.testing.assert_allclose(mom.sd, sd, rtol=0.1)
+
+
+def test_a_mode_hundreds_of_sds_away_is_counted_from_a_global_sample():
+    """Two narrow modes 0.45 of the box apart (over 200 of their sds), 60 : 40: the
+    importance sampler started at the near one never meets the far one (its moments are
+    the near mode's: 0.8 sd off, sds 0.01-0.03x), PMC annealed from the whole box does,
+    and :func:`sample_moments` takes the moments from it: against the mixture's closed form."""
+    mu = np.array([[0.7, 0.6], [0.25, 0.3]])
+    sds = np.array([[0.002, 0.004], [0.002, 0.002]])
+    p = np.array([0.6, 0.4])
+
+    def two_modes(a, b):
+        comps = [np.log(pk) - np.log(2 * np.pi * s[0] * s[1])
+                 - 0.5 * (((a - m[0]) / s[0]) ** 2 + ((b - m[1]) / s[1]) ** 2)
+                 for pk, m, s in zip(p, mu, sds, strict=True)]
+        return np.logaddexp(*comps)
+
+    mean = p @ mu
+    cov = sum(pk * (np.diag(s**2) + np.outer(m, m)) for pk, m, s in zip(p, mu, sds, strict=True))
+    sd = np.sqrt(np.diag(cov - np.outer(mean, mean)))
+    target = _Fn(two_modes)
+    near = pl_moments(target, mu[0], np.diag(sds[0] ** 2), np.random.default_rng(0))
+    assert np.all(near.sd < 0.1 * sd)  # the far mode was never met
+    post = mrfpe.sample("pmc", target, seed=0, n_samples=4000)
+    mom = sample_moments(target, post)
+    assert mom.rounds == 0 and mom.ess >= 100
+    assert np.all(np.abs(mom.mean - mean) < 0.1 * sd), (mom.mean, mean)
+    np.testing.assert_allclose(mom.sd, sd, rtol=0.05)
+    assert np.allclose(mom.best_theta, mu[0], atol=0.01) or np.allclose(mom.best_theta, mu[1],
+                                                                         atol=0.01)
 
 
 def test_tempered_weights_share_the_weight_among_the_draws_asked_for():

@@ -22,6 +22,7 @@ reliable sample of the same PL.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from typing import Any
 
@@ -140,10 +141,11 @@ def pl_moments(pl: Any, theta: np.ndarray, cov0: np.ndarray, rng: np.random.Gene
     return PLMoments(mean, cov, float(n_eff), k + 1, best, best_lp)
 
 
-def sample_moments(pl: Any, post: xr.Dataset, *, name: str = "pl_sample") -> PLMoments:
+def sample_moments(pl: Any, post: xr.Dataset | str | os.PathLike, *,
+                   name: str = "pl_sample") -> PLMoments:
     """exp(PL)'s mean and covariance from a weighted sample of it: ``post``, a sampler's
     posterior on ``pl`` (e.g. PMC, whose annealing starts from the whole box and so
-    meets modes far from the MPLE).
+    meets modes far from the MPLE), or the path of one saved as netCDF.
 
     The sample is refused (``ValueError`` naming ``name``) unless it is a valid posterior
     of draws (not optima) over ``pl``'s parameters that does not flag itself unreliable,
@@ -152,7 +154,7 @@ def sample_moments(pl: Any, post: xr.Dataset, *, name: str = "pl_sample") -> PLM
     *this* PL, not of another scene's or a tempered one). ``rounds`` is 0; the best point
     is the heaviest particles' highest-PL one.
     """
-    posterior_option(name, post)
+    post = posterior_option(name, post)
     names = tuple(str(p) for p in post["param"].values)
     if names != tuple(pl.param_names):
         raise ValueError(f"{name} must be over the PL's parameters {list(pl.param_names)}; "
@@ -166,9 +168,10 @@ def sample_moments(pl: Any, post: xr.Dataset, *, name: str = "pl_sample") -> PLM
     d, n_eff = len(names), ess(post)
     if n_eff < 50 * d:
         raise ValueError(f"{name} has a Kish ESS of {n_eff:.0f}, below the {50 * d} (50 per "
-                         f"parameter) its covariance needs")
+                         f"parameter) its covariance needs: sample exp(PL) with more draws")
     lw, lt = post["log_weight"].values, post["log_target"].values
-    top = np.argsort(-np.where(np.isfinite(lw), lw, -np.inf))[:32]
+    finite = np.flatnonzero(np.isfinite(lw))
+    top = finite[np.argsort(-lw[finite])[:32]]
     theta = post["theta"].values
     lp = np.asarray(pl.log_prob(theta[top]), dtype=np.float64)
     gap = lp - lt[top]

@@ -117,7 +117,7 @@ def test_a_far_mode_the_start_never_meets_is_counted():
     np.testing.assert_allclose(mom.sd, sd, rtol=0.1)
 
 
-def test_a_mode_hundreds_of_sds_away_is_counted_from_a_global_sample():
+def test_a_mode_hundreds_of_sds_away_is_counted_from_a_global_sample(tmp_path):
     """Two narrow modes 0.45 of the box apart (over 200 of their sds), 60 : 40: the
     importance sampler started at the near one never meets the far one (its moments are
     the near mode's: 0.8 sd off, sds 0.01-0.03x), PMC annealed from the whole box does,
@@ -145,6 +145,9 @@ def test_a_mode_hundreds_of_sds_away_is_counted_from_a_global_sample():
     np.testing.assert_allclose(mom.sd, sd, rtol=0.05)
     assert np.allclose(mom.best_theta, mu[0], atol=0.01) or np.allclose(mom.best_theta, mu[1],
                                                                          atol=0.01)
+    mrfpe.posterior.save(post, tmp_path / "pl.nc")  # the same from the file it was saved to
+    np.testing.assert_array_equal(sample_moments(target, tmp_path / "pl.nc").covariance,
+                                  mom.covariance)
 
 
 def test_tempered_weights_share_the_weight_among_the_draws_asked_for():

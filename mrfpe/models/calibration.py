@@ -236,7 +236,7 @@ class AdjustedPL(Target):
         H = self._curvature(theta_pl)
         rng = np.random.default_rng(seed)
         s_mle = int(rng.integers(2**63))
-        mom = given if given is not None else _pl_moments(pl, theta_pl, H, rng, align)
+        mom = given if given is not None else _pl_moments(pl, theta_pl, H, b, rng, align)
         if mom is not None and mom.best_log_prob > lp_pl + 1e-3:  # the maximiser stopped short
             theta_pl, lp_pl = maximise(pl, grid=np.stack([theta_pl, mom.best_theta]), n_starts=2)
             H = self._curvature(theta_pl)
@@ -361,12 +361,12 @@ class AdjustedPL(Target):
                 "pl_moments_from": self.pl_moments_from}
 
 
-def _pl_moments(pl: Any, theta_pl: np.ndarray, H: np.ndarray, rng: np.random.Generator,
-                align: str) -> PLMoments | None:
+def _pl_moments(pl: Any, theta_pl: np.ndarray, H: np.ndarray, bounds: np.ndarray,
+                rng: np.random.Generator, align: str) -> PLMoments | None:
     """exp(PL)'s moments importance-sampled from the MPLE (None where that fails and
     ``align="mode"`` does not need them)."""
     try:
-        return pl_moments(pl, theta_pl, start_covariance(H, np.asarray(pl.bounds, float)), rng)
+        return pl_moments(pl, theta_pl, start_covariance(H, bounds), rng)
     except ValueError as err:
         if align == "moments":
             raise ValueError(f"{err}: exp(PL) is far from one Gaussian (a curved ridge "

@@ -93,6 +93,16 @@ def laplace_sd(ds: xr.Dataset) -> np.ndarray:
     return np.sqrt(np.diag(np.linalg.inv(H)))
 
 
+def cloud_against_target(ds: xr.Dataset, prefix: str) -> tuple[np.ndarray, np.ndarray]:
+    """A PMC cloud (``"pl"`` or ``"adjusted"``) against its target's own moments
+    (:func:`target_moments`): |weighted mean − centre| / sd, and weighted sd / sd."""
+    m, cloud = target_moments(ds), posterior(ds, prefix)
+    which = "pl" if prefix == "pl" else "adj"
+    sd = m[f"{which}_sd"]
+    return (np.abs(weighted_mean(cloud) - m[f"{which}_centre"]) / sd,
+            np.sqrt(np.diag(weighted_cov(cloud))) / sd)
+
+
 def span(v: np.ndarray) -> str:
     return f"{np.nanmedian(v):.2f} [{np.nanmin(v):.2f}, {np.nanmax(v):.2f}]"
 
@@ -112,8 +122,7 @@ def shifts(group: list[xr.Dataset]) -> list[list]:
         cols["err_pl"].append(np.abs(m["pl_centre"] - truth) / m["pl_sd"])
         cols["err_adj"].append(np.abs(m["adj_centre"] - truth) / m["adj_sd"])
         for prefix, key in (("pl", "pmc_pl"), ("adjusted", "pmc_adj")):
-            sd = np.sqrt(np.diag(weighted_cov(posterior(ds, prefix))))
-            cols[key].append(sd / m["pl_sd" if prefix == "pl" else "adj_sd"])
+            cols[key].append(cloud_against_target(ds, prefix)[1])
     a = {k: np.array(v) for k, v in cols.items()}
     return [[n, *(span(a[k][:, j]) for k in cols)] for j, n in enumerate(names)]
 
@@ -126,9 +135,7 @@ def disagreements(group: list[xr.Dataset]) -> tuple[int, list[str]]:
     rows = []
     reliable = [ds for ds in group if bool(ds["pl_reliable"])]
     for ds in reliable:
-        m, cloud = target_moments(ds), posterior(ds, "pl")
-        z = np.abs(weighted_mean(cloud) - m["pl_centre"]) / m["pl_sd"]
-        r = np.sqrt(np.diag(weighted_cov(cloud))) / m["pl_sd"]
+        z, r = cloud_against_target(ds, "pl")
         if z.max() > 0.5 or np.any((r < 0.77) | (r > 1.3)):
             rows.append(f"{json.loads(ds.attrs['cell'])}: mean {z.round(2).tolist()} sd off, "
                         f"sd ratio {r.round(2).tolist()}")

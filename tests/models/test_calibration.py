@@ -228,3 +228,54 @@ def test_a_sample_it_cannot_trust_is_refused_before_any_work(ising, monkeypatch)
     for message, (data, sample) in bad.items():
         with pytest.raises(ValueError, match=f"pl_sample.*{message}|{message}.*"):
             m.target("pl_adjusted", data, pl_sample=sample, pilot_sweeps=250, n_draws=10)
+
+
+def _spd(rng, d):
+    a = rng.normal(size=(d, d))
+    return a @ a.T + d * np.eye(d)
+
+
+@pytest.mark.parametrize("d", [1, 2, 4])
+def test_the_transport_map_is_the_symmetric_root(d):
+    from scipy.linalg import sqrtm
+
+    rng = np.random.default_rng(d)
+    S, D = _spd(rng, d), _spd(rng, d)
+    T = calibration.transport_map(S, D)
+    np.testing.assert_allclose(T, T.T, atol=1e-12)
+    assert np.all(np.linalg.eigvalsh(T) > 0)
+    np.testing.assert_allclose(T @ S @ T, D, rtol=1e-10, atol=1e-10)
+    # a second route: scipy's general square root of the same formula
+    Sh = np.real(sqrtm(S))
+    Shi = np.linalg.inv(Sh)
+    np.testing.assert_allclose(T, Shi @ np.real(sqrtm(Sh @ D @ Sh)) @ Shi, rtol=1e-8)
+    # it is its own inverse's inverse, and it does not depend on the parameters' order
+    np.testing.assert_allclose(calibration.transport_map(D, S), np.linalg.inv(T), rtol=1e-8)
+    P = np.eye(d)[rng.permutation(d)]
+    np.testing.assert_allclose(calibration.transport_map(P @ S @ P.T, P @ D @ P.T),
+                               P @ T @ P.T, rtol=1e-8, atol=1e-12)
+
+
+def test_diagonal_spreads_give_the_ratio_of_their_sds():
+    T = calibration.transport_map(np.diag([4.0, 0.25]), np.diag([1.0, 1.0]))
+    np.testing.assert_allclose(T, np.diag([0.5, 2.0]))
+
+
+@pytest.mark.parametrize("align", ["moments", "mode"])
+def test_both_affine_maps_meet_the_alignment(ising, align):
+    m, x, *_ = ising
+    chol = m.target("pl_adjusted", x, seed=2, align=align)
+    sym = m.target("pl_adjusted", x, seed=2, align=align, affine="transport")
+    assert sym.describe()["affine"] == "transport" and chol.describe()["affine"] == "cholesky"
+    np.testing.assert_allclose(sym.W, sym.W.T, atol=1e-12)
+    np.testing.assert_array_equal(sym.theta_ml, chol.theta_ml)  # same simulations
+    info = chol.fisher_information
+    for adj in (chol, sym):
+        A = np.linalg.inv(adj.W)
+        if align == "moments":  # the covariance the PL's maps onto is I⁻¹
+            np.testing.assert_allclose(A @ adj.pl_covariance @ A.T, np.linalg.inv(info),
+                                       rtol=1e-8)
+        else:  # the Hessian at the mode is the Fisher information
+            np.testing.assert_allclose(adj.W.T @ adj.pl_hessian @ adj.W, info, rtol=1e-8)
+    with pytest.raises(ValueError, match="affine"):
+        m.target("pl_adjusted", x, affine="qr")

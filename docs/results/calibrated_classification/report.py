@@ -1,8 +1,9 @@
 """Miss / WNN / NN1 with exp(PL_s) posteriors and with calibrated ones; what calibration moved.
 
 Reads ``trials/`` (written by ``run.py``) and writes ``report.md``. Only specimens with both
-clouds enter the classification tables (a refused calibration is listed, and the tables say
-how many specimens they cover); classes are the materials, as in ``../classification``.
+clouds enter the classification tables (a refused calibration, or a calibrated target that
+PMC could not sample, is listed, and the tables say how many specimens they cover); classes
+are the materials, as in ``../classification``.
 Each target's own moments are exp(PL_s)'s importance-sampled mean and covariance (which
 the calibration maps) and the calibrated target's (θ_ML + δ, I⁻¹, by construction); the
 distances compare :data:`SET_SIZE` equally weighted points drawn from each PMC cloud by
@@ -192,7 +193,8 @@ def main() -> None:
     for brdf in ("ward", "phong"):
         group = [ds for ds in trials if json.loads(ds.attrs["cell"])["brdf"] == brdf]
         refused = [ds for ds in group if "refused" in ds.attrs]
-        both = sorted((ds for ds in group if "refused" not in ds.attrs),
+        failed = [ds for ds in group if "adjusted_failed" in ds.attrs]
+        both = sorted((ds for ds in group if not {"refused", "adjusted_failed"} & set(ds.attrs)),
                       key=lambda ds: (json.loads(ds.attrs["cell"])["material"],
                                       json.loads(ds.attrs["cell"])["specimen"]))
         if not both:
@@ -208,6 +210,9 @@ def main() -> None:
             f"{len(refused)} refused"
             + "".join(f"\n- {json.loads(ds.attrs['cell'])}: {ds.attrs['refused']}"
                       for ds in refused)
+            + (f"\n\n{len(failed)} calibrated, but PMC could not sample the calibrated target"
+               + "".join(f"\n- {json.loads(ds.attrs['cell'])}: {ds.attrs['adjusted_failed']}"
+                         for ds in failed) if failed else "")
             + f"\n\nCalibration per specimen (median [min, max]): build "
             f"{np.median(cost[:, 0]):.0f} s [{cost[:, 0].min():.0f}, {cost[:, 0].max():.0f}], "
             f"{np.median(cost[:, 1]):.0f} simulation sweeps, autocorrelation time "

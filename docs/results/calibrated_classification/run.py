@@ -23,7 +23,8 @@ specimen in ``trials/``; a file that exists is skipped, so an interrupted run re
 ``--shard k n`` takes every n-th specimen from the k-th (``--reverse`` from the shard's end,
 for a second process on an unfinished shard). A specimen whose calibration
 is refused (an MPLE on the box's face, a singular Fisher information) is recorded
-with the reason and its ``pl`` cloud.
+with the reason and its ``pl`` cloud; one whose calibrated target PMC could not sample
+(``adjusted_failed``) with the reason, its ``pl`` cloud and its calibration.
 
     python docs/results/calibrated_classification/run.py --shard 0 2   # and --shard 1 2
     python docs/results/calibrated_classification/run.py --shape 100 100 --shard 0 2  # full size
@@ -140,7 +141,10 @@ def run_one(config: dict, cell: dict, seed: int,
         attrs["refused"] = str(err)
     else:
         build_s = time.perf_counter() - t0
-        data.update(cloud(mrfpe.sample("pmc", adj, seed=s_adj, **PMC), "adjusted"))
+        try:
+            data.update(cloud(mrfpe.sample("pmc", adj, seed=s_adj, **PMC), "adjusted"))
+        except ValueError as err:  # e.g. a support PMC's start does not meet: recorded
+            attrs["adjusted_failed"] = str(err)
         attrs["adjusted_sampled_at"] = library_commit()
         mle = adj.mle
         d2 = ("param", "param2")

@@ -84,6 +84,17 @@ def cloud(post: xr.Dataset, prefix: str) -> dict:
             f"{prefix}_reliable": ((), bool(post.attrs.get("diag_reliable", True)))}
 
 
+def adjusted_cloud(adj: AdjustedPL, seed: int, attrs: dict) -> dict:
+    """PMC's cloud of the calibrated target; where PMC cannot sample it (e.g. a support
+    its start does not meet), no cloud and the reason in ``attrs["adjusted_failed"]``."""
+    attrs.pop("adjusted_failed", None)
+    try:
+        return cloud(mrfpe.sample("pmc", adj, seed=seed, **PMC), "adjusted")
+    except ValueError as err:
+        attrs["adjusted_failed"] = str(err)
+        return {}
+
+
 def trial_seeds(seed: int) -> tuple[int, int, int]:
     """The seeds of a trial's exp(PL_s) cloud, calibrated cloud and calibration."""
     return tuple(int(s) for s in np.random.SeedSequence([seed, 7]).generate_state(3))
@@ -109,8 +120,7 @@ def refresh_adjusted(config: dict, path: Path) -> bool:
                              theta_ml=ds["theta_adjusted"].values,
                              theta_pl=ds["theta_mple"].values)
     _, s_adj, _ = trial_seeds(seed)
-    for name, (dims, value) in cloud(mrfpe.sample("pmc", adj, seed=s_adj, **PMC),
-                                     "adjusted").items():
+    for name, (dims, value) in adjusted_cloud(adj, s_adj, ds.attrs).items():
         ds[name] = (dims, value)
     ds.attrs["adjusted_sampled_at"] = library_commit()
     write_atomic(ds, path)
@@ -141,10 +151,7 @@ def run_one(config: dict, cell: dict, seed: int,
         attrs["refused"] = str(err)
     else:
         build_s = time.perf_counter() - t0
-        try:
-            data.update(cloud(mrfpe.sample("pmc", adj, seed=s_adj, **PMC), "adjusted"))
-        except ValueError as err:  # e.g. a support PMC's start does not meet: recorded
-            attrs["adjusted_failed"] = str(err)
+        data.update(adjusted_cloud(adj, s_adj, attrs))
         attrs["adjusted_sampled_at"] = library_commit()
         mle = adj.mle
         d2 = ("param", "param2")

@@ -36,11 +36,13 @@ def _symmetric(M: np.ndarray) -> np.ndarray:
     return 0.5 * (M + M.T)
 
 
-def mode_map(H: np.ndarray, m_chol: np.ndarray, info: np.ndarray, affine: str) -> np.ndarray:
-    """``W`` with ``Wᵀ H W = I``: the Hessian at the mode is the Fisher information."""
+def mode_map(H: np.ndarray, info: np.ndarray, affine: str) -> np.ndarray:
+    """``W`` with ``Wᵀ H W = I``: the Hessian at the mode is the Fisher information
+    (``H`` positive definite)."""
     if affine == "transport":
         return transport_map(H, info)
-    return np.linalg.solve(m_chol, np.linalg.cholesky(info).T)  # M⁻¹N, H = MᵀM, I = NᵀN
+    # M⁻¹N with H = MᵀM, I = NᵀN
+    return np.linalg.solve(np.linalg.cholesky(H).T, np.linalg.cholesky(info).T)
 
 
 def moment_map(pl_cov: np.ndarray, info: np.ndarray, affine: str) -> np.ndarray:

@@ -258,8 +258,7 @@ class AdjustedPL(Target):
         if mom is not None and mom.best_log_prob > lp_pl + 1e-3:  # the maximiser stopped short
             theta_pl, lp_pl = maximise(pl, grid=np.stack([theta_pl, mom.best_theta]), n_starts=2)
             H = self._curvature(theta_pl)
-        m_chol = _cholesky_or_none(H)
-        if align == "mode" and m_chol is None:
+        if align == "mode" and _cholesky_or_none(H) is None:
             raise ValueError(f"the PL's Hessian is not negative definite at the MPLE "
                              f"{theta_pl.round(4).tolist()} (eigenvalues of its negative "
                              f"{np.linalg.eigvalsh(H).round(3).tolist()}), which align='mode' "
@@ -280,7 +279,7 @@ class AdjustedPL(Target):
             draws = simulate_draws(lik, theta_pl, n_draws, seed=s_mle, pilot_sweeps=pilot_sweeps)
             info, sims = fisher_information(lik, draws), draws.n_sweeps
             theta_ml = theta_pl
-        centre, W = ((theta_pl, mode_map(H, m_chol, info, affine)) if align == "mode"
+        centre, W = ((theta_pl, mode_map(H, info, affine)) if align == "mode"
                      else (mom.mean, moment_map(pl_cov, info, affine)))
         if align == "moments" and self.mle is not None:
             # mean = MLE + the likelihood's skew (Laplace expansion)

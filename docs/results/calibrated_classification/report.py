@@ -182,6 +182,11 @@ def classification(group: list[xr.Dataset], jobs: int) -> str:
     return "\n\n".join(out)
 
 
+def reasons(group: list[xr.Dataset], key: str) -> str:
+    """A markdown list of the specimens' cells and their ``key`` attribute."""
+    return "".join(f"\n- {json.loads(ds.attrs['cell'])}: {ds.attrs[key]}" for ds in group)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--jobs", type=int, default=1, help="processes for the pair loops")
@@ -207,12 +212,9 @@ def main() -> None:
         unreliable = sum(not bool(ds[f"{p}_reliable"]) for ds in both for p in ("pl", "adjusted"))
         sections.append(
             f"## {brdf}\n\n{len(group)} specimens computed, {len(both)} calibrated, "
-            f"{len(refused)} refused"
-            + "".join(f"\n- {json.loads(ds.attrs['cell'])}: {ds.attrs['refused']}"
-                      for ds in refused)
+            f"{len(refused)} refused" + reasons(refused, "refused")
             + (f"\n\n{len(failed)} calibrated, but PMC could not sample the calibrated target"
-               + "".join(f"\n- {json.loads(ds.attrs['cell'])}: {ds.attrs['adjusted_failed']}"
-                         for ds in failed) if failed else "")
+               + reasons(failed, "adjusted_failed") if failed else "")
             + f"\n\nCalibration per specimen (median [min, max]): build "
             f"{np.median(cost[:, 0]):.0f} s [{cost[:, 0].min():.0f}, {cost[:, 0].max():.0f}], "
             f"{np.median(cost[:, 1]):.0f} simulation sweeps, autocorrelation time "

@@ -33,7 +33,7 @@ def _targets(quick: bool) -> tuple[str, list[str]]:
     _, extra = bench_targets.run(["ward"], ["float32"], [10, 20, 30, 40], (100, 100), 3,
                                  pmc=True)
     return "targets and PMC", [*body, "", "float32 (`dtype=\"float32\"`, accuracy: "
-                               "`tests/targets/test_pseudolikelihood.py::test_float32_accuracy`):"
+                               "`tests/brdf/targets/test_pseudolikelihood.py::test_float32_accuracy`):"
                                "\n", *extra]
 
 

@@ -119,7 +119,7 @@ def peak_memory():
 def ward_scene_target(i: int, shape: tuple[int, int], n_labels: int, **options: Any):
     """Scene ``i``: random true Ward parameters (unit cube, in [0.05, 0.95]^3) and its ``pls``."""
     import mrfpe
-    from mrfpe.synthetic import make_scene
+    from mrfpe.brdf.synthetic import make_scene
 
     u = np.random.default_rng(1000 + i).uniform(0.05, 0.95, 3)
     theta = np.asarray(mrfpe.brdf.get("ward").to_natural(u)).reshape(-1)

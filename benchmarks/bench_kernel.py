@@ -58,7 +58,7 @@ OPS_PER_EVAL, FMA_OPS_PER_EVAL = 16.3, 8.2
 def _fma_kernel():
     from numba import njit
 
-    from mrfpe.engine.fastmath import FASTMATH
+    from mrfpe.fastmath import FASTMATH
 
     @njit(fastmath=FASTMATH, error_model="numpy")
     def fma_rate(x, n, m, c):
@@ -128,7 +128,7 @@ def speed_of_light(dtype: str) -> dict:
 
 
 def _scene(brdf: str, shape, n_labels: int):
-    from mrfpe.synthetic import make_scene
+    from mrfpe.brdf.synthetic import make_scene
 
     theta = {"ward": [0.7, 0.4, 0.225], "phong": [0.5, 0.4, 7.5]}[brdf]
     return make_scene(brdf=brdf, theta=theta, shape=shape, n_labels=n_labels,
@@ -214,7 +214,7 @@ def pmc_compare(shape, n_labels, dtype, n_samples, n_iter, repeat) -> dict:
 
 def lm_compare(shape, n_labels, n_seeds, repeat) -> dict:
     import mrfpe
-    from mrfpe.targets import jacobian
+    from mrfpe.brdf.targets import jacobian
 
     ts = _targets(_scene("ward", shape, n_labels))
     orig = jacobian.supports

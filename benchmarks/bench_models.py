@@ -7,7 +7,7 @@ alike.
 * ``gibbs``: Gibbs site updates per second of :func:`mrfpe.models.simulate.simulate`
   (numba, colour classes, counter-based uniforms) against a plain vectorised NumPy
   checkerboard sweep (:func:`numpy_gibbs`, the sweep of
-  :func:`mrfpe.targets.potts.gibbs_sample`: neighbour counts, softmax, inverse CDF)
+  :func:`mrfpe.models.short_forms.gibbs_sample`: neighbour counts, softmax, inverse CDF)
   on a 512 x 512 Ising model (q = 2, 4-neighbour), numba on one thread (against the
   single-threaded NumPy sweep) and with the threads the library takes by default
   (``thread_budget``: a second thread from ~1.6e6 site-states per sweep, so at 512²
@@ -19,7 +19,7 @@ alike.
   512² at the critical coupling ``log(1 + sqrt(q))``.
 
 * ``label_sweeps``: Gibbs sweeps of the BRDF label field
-  (:func:`mrfpe.models.brdf_simulate.simulate_labels`) with the radiance memo
+  (:func:`mrfpe.brdf.simulate.simulate_labels`) with the radiance memo
   against rendering every triangle, after a warm-up that fills the memo
   (:func:`label_sweeps`);
 * ``posteriors``: the cost of a posterior over θ by raw exp(PL), the calibrated
@@ -331,7 +331,7 @@ def posterior_costs(quick: bool = False) -> list[str]:
 
 def _label_sweeps(field, u, x, sweeps: int, memo: bool) -> np.ndarray:
     """``sweeps`` label sweeps from ``x``, with the radiance memo or rendering every triangle."""
-    from mrfpe.models.brdf_simulate import simulate_labels
+    from mrfpe.brdf.simulate import simulate_labels
 
     return simulate_labels(field, u, 1, n_sweeps=sweeps, seed=1, init=x, memoise=memo)[0]
 
@@ -344,8 +344,8 @@ def label_sweeps(quick: bool = False) -> list[str]:
     ``warm`` sweeps. Both chains are the same chain (the memo's radiances are the
     render's), so the two sides do the same work but for the look-ups.
     """
-    from mrfpe.models.brdf_simulate import label_field, simulate_labels
-    from mrfpe.synthetic import make_scene
+    from mrfpe.brdf.simulate import label_field, simulate_labels
+    from mrfpe.brdf.synthetic import make_scene
 
     cases = [((10, 10), 5)] if quick else [((20, 20), 10), ((40, 40), 10), ((100, 100), 20)]
     warm, sweeps, repeat = (5, 2, 2) if quick else (40, 5, 3)

@@ -18,7 +18,7 @@ s x s block divided by s; a block with fewer than half finite values has no
 ground truth. Error: bad-1px = fraction of pixels with ground truth whose
 |estimate - truth| > 1 px; pixels a method leaves unmatched count as bad.
 
-Methods: ``mrfpe.stereo.disparity`` with the default settings and 10
+Methods: ``mrfpe.brdf.stereo.disparity`` with the default settings and 10
 iterations, accelerated (6.38-6.41) and parallel (6.33) schedules, the pixel
 disparity being the argmax of the product of its four corner beliefs;
 OpenCV StereoSGBM (block 5, P1 = 8*3*5^2, P2 = 32*3*5^2, uniqueness 10,
@@ -90,7 +90,7 @@ def bad1(est: np.ndarray, gt: np.ndarray, valid: np.ndarray | None = None) -> fl
 
 
 def run_mrfpe(left, right, dmax, schedule):
-    from mrfpe.stereo import disparity
+    from mrfpe.brdf.stereo import disparity
 
     t0 = time.perf_counter()
     res = disparity(left, right, dmax, schedule=schedule, iterations=10)
@@ -137,9 +137,9 @@ def _rays(P, xy):
 def pl_vs_disparity_noise(ratio: float, sigmas=(0.0, 0.01, 0.02, 0.05), theta=(0.5, 0.3, 0.15)):
     """Distance of the ``pl`` grid maximiser from the truth against disparity noise."""
     import mrfpe
-    from mrfpe.geometry import DirectionalLight, ProjectiveCamera, triangulate_linear
-    from mrfpe.scene import Scene
-    from mrfpe.synthetic import render
+    from mrfpe.brdf.geometry import DirectionalLight, ProjectiveCamera, triangulate_linear
+    from mrfpe.brdf.scene import Scene
+    from mrfpe.brdf.synthetic import render
 
     H = W = 16
     f = 2.5 * W
@@ -192,7 +192,7 @@ def _plane_image(P, xy, plane, texture):
 
 def ncc_accuracy_on_slanted_planes(angles=(0, 10, 20, 30)):
     """Median |WTA disparity error| (px) of window NCC on a textured plane turned by each angle."""
-    from mrfpe.stereo.match import match_measure
+    from mrfpe.brdf.stereo.match import match_measure
 
     H = W = 24
     f, b = 2.5 * W, 2.5 * W
@@ -264,7 +264,7 @@ def main(argv=None) -> int:
 
 def run(levels: list[str], plot: str | Path) -> list[str]:
     """mrfpe's BP (both schedules) and OpenCV on the motorcycle pair; markdown body lines."""
-    from mrfpe.stereo import disparity
+    from mrfpe.brdf.stereo import disparity
 
     # warm the numba kernels so that timings are run times, not compile times
     z = np.zeros((8, 12))

@@ -57,7 +57,7 @@ def comparison_kernel():
     """The bare-minimum loop for the same Ward evaluations and label log-sum-exps."""
     from numba import njit, prange
 
-    from mrfpe.engine.fastmath import FASTMATH, vexp, vlog
+    from mrfpe.fastmath import FASTMATH, vexp, vlog
 
     @njit(parallel=True, fastmath=FASTMATH, error_model="numpy")
     def floor(coef, feat, n_nodes, B, nv, bl, out):
@@ -116,9 +116,9 @@ def bench(brdf: str, shape: tuple[int, int], labels: list[int], repeat: int, pmc
     import numba
 
     import mrfpe
-    from mrfpe.engine.classic import block_size
-    from mrfpe.synthetic import make_scene
-    from mrfpe.targets import reflectance
+    from mrfpe.brdf.engine.classic import block_size
+    from mrfpe.brdf.synthetic import make_scene
+    from mrfpe.brdf.targets import reflectance
 
     model = mrfpe.brdf.get(brdf)
     threads = numba.get_num_threads()

@@ -10,12 +10,16 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
+from mrfpe import _moved
 from mrfpe._version import __version__
 
+_moved.install()  # old paths of moved modules import, with a DeprecationWarning
+
 _SUBMODULES = {
-    "brdf", "geometry", "lattice", "shading", "scene", "synthetic", "targets", "samplers",
-    "posterior", "distances", "classify", "stereo", "testing", "study", "resampling",
-    "mixture", "validation", "threads",
+    "brdf", "models", "targets", "samplers", "posterior", "distances", "classify", "testing",
+    "study", "resampling", "mixture", "validation", "threads", "fastmath",
+    # old paths (mrfpe._moved): the module at its new place, with a DeprecationWarning
+    "geometry", "lattice", "shading", "scene", "synthetic", "stereo", "engine",
 }
 
 
@@ -74,8 +78,13 @@ def __getattr__(name: str) -> Any:
 
         return PosteriorWarning
     if name == "Scene":
-        from mrfpe.scene import Scene
+        import warnings
 
+        from mrfpe.brdf.scene import Scene
+
+        warnings.warn("mrfpe.Scene has moved to mrfpe.brdf.Scene (mrfpe.brdf.scene.Scene); "
+                      "the old name goes in the next minor version", DeprecationWarning,
+                      stacklevel=2)
         return Scene
     raise AttributeError(f"module 'mrfpe' has no attribute {name!r}")
 

@@ -37,7 +37,7 @@ def parse_assignments(items: Sequence[str], option: str = "--set") -> dict[str, 
 
 
 def _load_scene(path: str) -> Any:
-    from mrfpe.scene import Scene
+    from mrfpe.brdf.scene import Scene
 
     return Scene.load(path)
 

@@ -6,7 +6,7 @@ density of one weighted set's kernel estimate at another's points.
 
 The (rows × components) log-sum-exp runs in one numba kernel (parallel over
 rows, components as the SIMD lanes, the vectorising ``exp`` of
-:mod:`mrfpe.engine.fastmath`): no (rows, components, d) temporary, about 6×
+:mod:`mrfpe.fastmath`): no (rows, components, d) temporary, about 6×
 faster than the NumPy route it replaced (:func:`log_mixture_density_numpy`,
 kept as the tests' second route).
 """
@@ -17,7 +17,7 @@ import numpy as np
 from numba import njit, prange
 from scipy.special import logsumexp
 
-from mrfpe.engine.fastmath import FASTMATH, vexp, vlog
+from mrfpe.fastmath import FASTMATH, vexp, vlog
 from mrfpe.threads import MIN_EVALS_PER_THREAD, thread_budget
 
 __all__ = ["log_mixture_density", "log_mixture_density_numpy"]

@@ -1,7 +1,7 @@
 """netCDF files in and out, with errors that name the file and what was expected.
 
 A leaf module (numpy, xarray, netCDF4 only): the command line, the study
-runner, :func:`mrfpe.posterior.load` and :meth:`mrfpe.scene.Scene.load` read
+runner, :func:`mrfpe.posterior.load` and :meth:`mrfpe.brdf.scene.Scene.load` read
 through :func:`open_dataset`, so a truncated or corrupt file gives one line --
 ``run.nc: not a readable netCDF posterior file (NetCDF: HDF error)`` -- instead
 of a bare ``OSError: HDF error`` from deep inside the HDF5 library.

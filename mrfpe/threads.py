@@ -3,8 +3,8 @@
 Kept apart from the kernels so that studies and samplers can cap threads
 without importing (and compiling) the numba kernel module.
 
-Vector width (:func:`configure_vector_width`, run by :mod:`mrfpe.engine` before
-it defines its kernels; :func:`mrfpe.engine.fastmath.compiled_features` tells
+Vector width (:func:`configure_vector_width`, run by :mod:`mrfpe.brdf.engine` before
+it defines its kernels; :func:`mrfpe.fastmath.compiled_features` tells
 what the code is compiled for). LLVM tunes some AVX-512 CPUs (e.g. Rocket Lake, Ice/Cascade Lake) to
 prefer 256-bit vectors, which costs the kernels 1.2-1.45x. numba has no
 per-function target option and builds one LLVM target machine per process at its

@@ -99,7 +99,7 @@ BELIEF_SUM_ATOL = 1e-6
 def check_beliefs(beliefs: Any, shape: tuple[int, ...], name: str = "beliefs") -> np.ndarray:
     """Per-node label beliefs as a new float64 array of ``shape`` (``(H+1, W+1, B)``), or
     ValueError naming ``name``: finite, >= 0, and summing to 1 over each node's labels
-    (within :data:`BELIEF_SUM_ATOL`). Shared by :class:`mrfpe.scene.Scene` and the ``pl3``
+    (within :data:`BELIEF_SUM_ATOL`). Shared by :class:`mrfpe.brdf.scene.Scene` and the ``pl3``
     target's ``beliefs`` option."""
     try:
         b = np.array(beliefs, dtype=np.float64)

@@ -21,11 +21,12 @@ __all__ = ["main"]
 def main() -> int:
     """``mrfpe warmup``: compile and cache the kernels of the pls, fit and pml targets."""
     from mrfpe.brdf import get as get_brdf
-    from mrfpe.synthetic import make_scene
+    from mrfpe.brdf.engine import compiled_kernels
+    from mrfpe.brdf.synthetic import make_scene
     from mrfpe.targets import get as get_target
 
     t0 = time.perf_counter()
-    if kernels_cached():
+    if kernels_cached(compiled_kernels()):
         print("checking numba's cache of the numerical kernels ...")
     else:
         print("compiling the numerical kernels into numba's cache (once per install, "

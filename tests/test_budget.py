@@ -7,7 +7,7 @@ import pytest
 
 import mrfpe.targets as T
 from mrfpe import budget
-from mrfpe.synthetic import make_scene
+from mrfpe.brdf.synthetic import make_scene
 from mrfpe.targets import MemoryBudgetError, get, set_memory_budget
 
 

@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 
 from mrfpe import checksum, netcdf
 from mrfpe import posterior as P
-from mrfpe.scene import Scene
+from mrfpe.brdf.scene import Scene
 
 RESULTS = Path(__file__).resolve().parents[1] / "docs" / "results"
 
@@ -32,7 +32,7 @@ def _post():
 @pytest.fixture(scope="module")
 def written(tmp_path_factory):
     """A posterior and a scene written by mrfpe, with their bytes."""
-    from mrfpe.synthetic import make_scene
+    from mrfpe.brdf.synthetic import make_scene
 
     d = tmp_path_factory.mktemp("written")
     P.save(_post(), d / "post.nc")

@@ -14,7 +14,7 @@ from mrfpe import posterior as P
 @pytest.fixture(scope="module")
 def files(tmp_path_factory):
     from mrfpe.brdf import get
-    from mrfpe.synthetic import make_scene
+    from mrfpe.brdf.synthetic import make_scene
 
     d = tmp_path_factory.mktemp("files")
     theta = np.asarray(get("ward").to_natural(np.array([0.5, 0.4, 0.5]))).reshape(-1)

@@ -31,7 +31,7 @@ def test_demo_quick(tmp_path, capsys):
     assert (tmp_path / "scene.nc").stat().st_size > 0
     png = (tmp_path / "posterior.png").read_bytes()
     assert png[:8] == b"\x89PNG\r\n\x1a\n"
-    from mrfpe.scene import Scene
+    from mrfpe.brdf.scene import Scene
 
     scene = Scene.load(tmp_path / "scene.nc")
     assert scene.true_theta is not None and np.all(np.isfinite(scene.true_theta))

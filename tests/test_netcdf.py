@@ -57,7 +57,7 @@ def test_checks(tmp_path):
 def test_library_loaders_name_a_corrupt_file(tmp_path):
     """posterior.load and Scene.load read through open_dataset: a corrupt file is named."""
     from mrfpe import posterior as P
-    from mrfpe.scene import Scene
+    from mrfpe.brdf.scene import Scene
 
     bad = tmp_path / "bad.nc"
     bad.write_bytes(b"\x89HDF\r\n\x1a\n" + b"0" * 100)

@@ -44,7 +44,7 @@ def test_scene_and_pl3_share_the_beliefs_check():
     """One validator: the scene's beliefs and pl3's beliefs option give the same errors."""
     import dataclasses
 
-    from mrfpe.synthetic import make_scene
+    from mrfpe.brdf.synthetic import make_scene
     from mrfpe.targets import get
 
     scene = make_scene(theta=[0.5, 0.3, 0.1], shape=(4, 4), n_labels=3, seed=0)

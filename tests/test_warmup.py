@@ -1,5 +1,6 @@
 """``mrfpe warmup`` fills numba's cache of the numerical kernels."""
 
+from mrfpe.brdf.engine import compiled_kernels
 from mrfpe.samplers.kit.warm import kernels_cached
 
 
@@ -8,4 +9,4 @@ def test_warmup_command_fills_the_cache(capsys):
 
     assert main(["warmup"]) == 0
     assert "done in" in capsys.readouterr().out
-    assert kernels_cached()
+    assert kernels_cached(compiled_kernels())

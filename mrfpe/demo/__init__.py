@@ -93,9 +93,9 @@ def main(out_dir: str | Path = "mrfpe-demo", quick: bool = False, seed: int = 0)
     import mrfpe
     from mrfpe import posterior as P
     from mrfpe.brdf import get as get_brdf
+    from mrfpe.brdf.synthetic import make_scene
     from mrfpe.demo.figure import CAPTION, posterior_figure
     from mrfpe.experiments.writeup import mean_sd
-    from mrfpe.synthetic import make_scene
     from mrfpe.validation import check_seed
 
     if seed is None:

@@ -142,10 +142,10 @@ def specimen_scene(config: dict, seed: int,
               shape=tuple(config["shape"] if shape is None else shape),
               n_labels=config["n_labels"], surface=config["surface"],
               seed=child_seeds(seed, 3)[0])
-    clean = mrfpe.synthetic.make_scene(**kw)  # same seed: same surface and light, no noise
+    clean = mrfpe.brdf.synthetic.make_scene(**kw)  # same seed: same surface and light, no noise
     noise = config["noise_levels"][specimen % len(config["noise_levels"])] * float(
         np.percentile(clean.image, 99))
-    scene = mrfpe.synthetic.make_scene(**kw, noise=noise) if noise > 0 else clean
+    scene = mrfpe.brdf.synthetic.make_scene(**kw, noise=noise) if noise > 0 else clean
     return scene, u, noise
 
 

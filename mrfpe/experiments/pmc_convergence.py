@@ -40,7 +40,7 @@ Precision: the target is built in float32 by default. PMC needs log-target
 differences to a fraction of a nat; float32 per-node terms (summed in
 float64) keep ``log_prob`` within 2e-6 relative, a few 1e-3 nats at a 100×100
 lattice's values, with the same softened weights to 1e-4 in total variation
-(``tests/targets/test_pseudolikelihood.py::test_float32_accuracy``); on one
+(``tests/brdf/targets/test_pseudolikelihood.py::test_float32_accuracy``); on one
 20-label scene with the same seed, PMC (II) returned the same MAP in float32
 and float64.
 """

@@ -52,7 +52,7 @@ def trial(config: dict, repeat: int, seed: int) -> xr.Dataset:
     u = np.asarray(u, dtype=float)
     s_scene, s_pmc = child_seeds(seed, 2)
     model = mrfpe.brdf.get(brdf)
-    scene = mrfpe.synthetic.make_scene(brdf=brdf, theta=model.to_natural(u),
+    scene = mrfpe.brdf.synthetic.make_scene(brdf=brdf, theta=model.to_natural(u),
                                        shape=tuple(config["shape"]),
                                        n_labels=config["n_labels"],
                                        surface=config["surfaces"][brdf], seed=s_scene)

@@ -54,7 +54,7 @@ __all__ = [
 #: The thesis tests each model on its own best surface type (7.2): Ward on
 #: smooth thin-plate-spline surfaces, (isotropic) anisotropic Phong on jagged ones.
 DEFAULT_SURFACES = {"ward": "smooth", "phong": "jagged"}
-#: Surface types of :func:`mrfpe.synthetic.make_scene`.
+#: Surface types of :func:`mrfpe.brdf.synthetic.make_scene`.
 SURFACES = ("smooth", "jagged")
 
 
@@ -186,8 +186,9 @@ def check_target_options(config: Mapping[str, Any]) -> None:
     brdf = config.get("brdf", "ward")
     brdf = brdf[0] if isinstance(brdf, list) else brdf
     model = mrfpe.brdf.get(brdf)
-    scene = mrfpe.synthetic.make_scene(brdf=brdf, theta=model.to_natural(np.full(model.d, 0.5)),
-                                       shape=(4, 4), n_labels=2, seed=0)
+    scene = mrfpe.brdf.synthetic.make_scene(
+        brdf=brdf, theta=model.to_natural(np.full(model.d, 0.5)), shape=(4, 4), n_labels=2,
+        seed=0)
     for name, options in by_target.items():
         if not isinstance(options, dict):
             raise ValueError(f"setting 'target_options': options of {name!r} must be an "
@@ -286,7 +287,7 @@ def make_problem(brdf: str, seed: int, *, surface: str, shape: Sequence[int], n_
         u = np.random.default_rng(s_truth).uniform(lo, hi, model.d)
     else:
         u = np.asarray(truth, dtype=float)
-    scene = mrfpe.synthetic.make_scene(brdf=brdf, theta=model.to_natural(u),
+    scene = mrfpe.brdf.synthetic.make_scene(brdf=brdf, theta=model.to_natural(u),
                                        shape=tuple(shape), n_labels=n_labels, surface=surface,
                                        noise=noise, seed=s_scene)
     tgt = mrfpe.targets.get(target, scene, **(target_options or {}))

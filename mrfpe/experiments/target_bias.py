@@ -51,7 +51,7 @@ def _target_names() -> tuple[str, ...]:
 def trial(config: dict, repeat: int, seed: int) -> xr.Dataset:
     """One scene; per target its maximiser, then every sampler run on that target."""
     import mrfpe
-    from mrfpe.targets.pseudolikelihood import auto_sigma_b
+    from mrfpe.brdf.targets.pseudolikelihood import auto_sigma_b
 
     brdf = config["brdf"]
     s_truth, s_scene, s_max, s_runs = child_seeds(seed, 4)
@@ -60,9 +60,9 @@ def trial(config: dict, repeat: int, seed: int) -> xr.Dataset:
     u = np.random.default_rng(s_truth).uniform(lo, hi, model.d)
     kw = dict(brdf=brdf, theta=model.to_natural(u), shape=tuple(config["shape"]),
               n_labels=config["n_labels"], surface=config["surface"], seed=s_scene)
-    clean = mrfpe.synthetic.make_scene(**kw)
+    clean = mrfpe.brdf.synthetic.make_scene(**kw)
     noise = config["noise"] * float(np.percentile(clean.image, 99))
-    scene = mrfpe.synthetic.make_scene(**kw, noise=noise) if noise > 0 else clean
+    scene = mrfpe.brdf.synthetic.make_scene(**kw, noise=noise) if noise > 0 else clean
     sigma_b = config["sigma_b_scale"] * auto_sigma_b(scene)
     targets, runs = config["targets"], list(config["runs"])
     max_to_truth = np.full(len(targets), np.nan)

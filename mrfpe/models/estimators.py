@@ -86,11 +86,11 @@ class ConditionalTarget(ModelTarget):
 
         ``kind="coding"``: the graph's colour classes within this target's nodes
         (Besag's codings; ``k`` must be None or their number); ``"strided"`` /
-        ``"block"``: :func:`mrfpe.lattice.split_ids` over the node ids -- or over
+        ``"block"``: :func:`mrfpe.targets.partition.split_ids` over the node ids -- or over
         the blocks of a block pseudolikelihood (thesis 5.67, 5.68) -- which are
         codings only by accident of the lattice width.
         """
-        from mrfpe.lattice import split_ids
+        from mrfpe.targets.partition import split_ids
 
         if self.blocks is not None:
             if kind == "coding":

@@ -28,7 +28,7 @@ from mrfpe.models.design import FORBIDDEN, Design, check_configurations
 from mrfpe.threads import configure_vector_width, thread_budget
 from mrfpe.validation import check_positive_int, check_seed
 
-configure_vector_width()  # before our first @njit, as mrfpe.engine does
+configure_vector_width()  # before our first @njit, as mrfpe.brdf.engine does
 
 __all__ = ["METHODS", "simulate", "swendsen_wang_form"]
 

@@ -16,6 +16,7 @@ import numpy as np
 from mrfpe.samplers.base import check_choice, check_positive_int, check_range
 from mrfpe.samplers.kit import Run, map_batched
 from mrfpe.samplers.multistart import MultiSeedOptimiser
+from mrfpe.targets.base import has_residual_jacobian
 
 __all__ = ["NONFINITE_RESIDUAL", "LMMultiSeed"]
 
@@ -65,7 +66,8 @@ class LMMultiSeed(MultiSeedOptimiser):
         How the bounded box is mapped for the unbounded LM.
     jacobian : ``"batched"`` | ``"minpack"``
         ``"batched"`` (default): the analytic Jacobian of the residuals from the
-        same kernel pass as the residuals (:mod:`mrfpe.targets.jacobian`) where
+        same kernel pass as the residuals (the target's ``residuals_and_jacobians``, e.g.
+        :mod:`mrfpe.brdf.targets.jacobian`) where
         the target supports it (the BRDF pseudolikelihood family; that pass
         counts as one evaluation), else MINPACK lmdif's forward-difference Jacobian
         (step √eps·|z_j|) computed in one batched ``residuals`` call of d rows;
@@ -134,12 +136,9 @@ class LMMultiSeed(MultiSeedOptimiser):
         """Residuals and their Jacobian in z at each row of ``zs`` (K, d), in one kernel pass.
 
         Row by row the numbers are those of a single-point call
-        (:func:`mrfpe.targets.jacobian.residuals_and_jacobians`), so batching seeds
-        changes no optimum.
+        (the target's ``residuals_and_jacobians``), so batching seeds changes no optimum.
         """
-        from mrfpe.targets import jacobian as _jac
-
-        r, jt = _jac.residuals_and_jacobians(target, self._to_theta(zs, lo, hi))
+        r, jt = target.residuals_and_jacobians(self._to_theta(zs, lo, hi))
         rows = []
         for q, z in enumerate(zs):
             dth = (0.5 * (hi - lo) * np.cos(z) if self.transform == "sine"
@@ -155,13 +154,12 @@ class LMMultiSeed(MultiSeedOptimiser):
         residual-and-Jacobian passes batched (:func:`mrfpe.samplers.kit.map_batched`)."""
         import numba
 
-        from mrfpe.targets import jacobian as _jac
         from mrfpe.threads import limit_threads
 
         cost = float(getattr(target, "cost", 1.0))
         lo, hi = bounds[:, 0], bounds[:, 1]
         lock = threading.Lock()  # one kernel call at a time: the caller's between seeds too
-        analytic = self.jacobian == "batched" and _jac.supports(target)
+        analytic = self.jacobian == "batched" and has_residual_jacobian(target)
         if analytic and self.concurrent_seeds > 1:
             threads = numba.get_num_threads()  # numba's setting is per thread: carry it over
 

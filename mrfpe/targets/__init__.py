@@ -3,12 +3,12 @@
 ``mrfpe.targets.get(name, data, **options)`` builds a target by name. What
 ``data`` is depends on the target (:func:`data_kind`):
 
-* ``"scene"`` -- the BRDF pseudolikelihoods on a :class:`mrfpe.scene.Scene`
-  (unit-cube sampling space, :mod:`mrfpe.targets.pseudolikelihood`): ``pl``
+* ``"scene"`` -- the BRDF pseudolikelihoods on a :class:`mrfpe.brdf.scene.Scene`
+  (unit-cube sampling space, :mod:`mrfpe.brdf.targets.pseudolikelihood`): ``pl``
   (4.23-4.24, 5.64-5.66), ``pl2`` (6.54-6.59), ``pl3`` (6.60-6.62), ``pls``
   (7.5-7.7), and beyond the thesis ``fit`` and ``pml``;
 * ``"configurations"`` -- the generic auto-logistic Ising/Potts model on observed
-  (H, W) or (M, H, W) integer configurations (:mod:`mrfpe.targets.potts`):
+  (H, W) or (M, H, W) integer configurations (:mod:`mrfpe.models.short_forms`):
   ``potts`` (pseudolikelihood) and ``potts_exact`` (exact log-likelihood by
   enumeration, tiny lattices).
 
@@ -21,7 +21,6 @@ budget (:func:`memory_budget`, :func:`set_memory_budget`, ``MRFPE_MEMORY_BUDGET`
 
 from __future__ import annotations
 
-import importlib
 from typing import Any
 
 from mrfpe.budget import MemoryBudgetError, memory_budget, set_memory_budget
@@ -35,34 +34,28 @@ __all__ = ["MemoryBudgetError", "Option", "Softened", "Target", "as_theta_batch"
            "set_memory_budget",
            "softened", "target_class"]
 
-# name -> (module, class); imported on first use so that `import mrfpe.targets` stays light.
-_TARGETS = {
-    "pl": ("mrfpe.targets.pseudolikelihood", "PL"),
-    "pl2": ("mrfpe.targets.pseudolikelihood", "PL2"),
-    "pl3": ("mrfpe.targets.pseudolikelihood", "PL3"),
-    "pls": ("mrfpe.targets.pseudolikelihood", "PLS"),
-    "fit": ("mrfpe.targets.pseudolikelihood", "ImageFit"),
-    "pml": ("mrfpe.targets.pseudolikelihood", "CompositeMarginalLikelihood"),
-    "potts": ("mrfpe.targets.potts", "PottsPseudoLikelihood"),
-    "potts_exact": ("mrfpe.targets.potts", "PottsExactLikelihood"),
-}
-
-
 def names() -> tuple[str, ...]:
-    """Names accepted by :func:`get`."""
-    return tuple(_TARGETS)
+    """Names accepted by :func:`get`: the working targets of the ``mrfpe.targets``
+    entry-point group (:mod:`mrfpe.targets.registry`), sorted."""
+    from mrfpe.targets.registry import registry
+
+    return tuple(registry.names())
 
 
 def target_class(name: str) -> type:
     """The class registered as ``name`` (ValueError listing the names, nearest first)."""
     import difflib
 
-    if not isinstance(name, str) or name not in _TARGETS:
-        close = difflib.get_close_matches(str(name), names(), n=1)
+    from mrfpe.targets.registry import registry
+
+    known = names()
+    if not isinstance(name, str) or name not in known:
+        close = difflib.get_close_matches(str(name), known, n=1)
         hint = f" (did you mean {close[0]!r}?)" if close else ""
-        raise ValueError(f"name must be one of {', '.join(names())}; got {name!r}{hint}")
-    mod, cls = _TARGETS[name]
-    return getattr(importlib.import_module(mod), cls)
+        broken = registry.errors().get(str(name))
+        why = f" (its plugin is broken: {broken})" if broken else ""
+        raise ValueError(f"name must be one of {', '.join(known)}; got {name!r}{hint}{why}")
+    return registry.get(name)
 
 
 def options(name: str) -> tuple[Option, ...]:
@@ -71,19 +64,8 @@ def options(name: str) -> tuple[Option, ...]:
 
 
 def data_kind(name: str) -> str:
-    """What :func:`get` takes as ``data`` for target ``name``: "scene" or "configurations"."""
+    """What :func:`get` takes as ``data`` for target ``name``, e.g. "scene" or "configurations"."""
     return str(target_class(name).data_kind)
-
-
-def _check_data(name: str, kind: str, data: Any) -> None:
-    from mrfpe.scene import Scene
-
-    if kind == "scene" and not isinstance(data, Scene):
-        raise ValueError(f"data must be an mrfpe.scene.Scene for target {name!r}; got "
-                         f"{type(data).__name__}")
-    if kind == "configurations" and isinstance(data, Scene):
-        raise ValueError(f"data must be observed (H, W) or (M, H, W) integer configurations "
-                         f"for target {name!r}, not a Scene (e.g. scene.observed_labels)")
 
 
 def get(name: str, data: Any, /, **options: Any) -> Target:
@@ -94,7 +76,7 @@ def get(name: str, data: Any, /, **options: Any) -> Target:
     name : str
         One of :func:`names`.
     data : Scene or array
-        A :class:`mrfpe.scene.Scene` for the BRDF targets; observed integer
+        A :class:`mrfpe.brdf.scene.Scene` for the BRDF targets; observed integer
         configurations (H, W) or (M, H, W) for ``potts`` and ``potts_exact``
         (:func:`data_kind`).
     **options
@@ -113,7 +95,9 @@ def get(name: str, data: Any, /, **options: Any) -> Target:
     """
     cls = target_class(name)
     resolve_options(name, cls.option_specs, options)  # fail fast, before the data is touched
-    _check_data(name, cls.data_kind, data)
+    check = getattr(cls, "check_data", None)
+    if callable(check):
+        check(data)
     return cls(data, **options)
 
 

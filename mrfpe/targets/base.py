@@ -2,8 +2,9 @@
 
 A target has ``param_names``, ``bounds`` (d, 2) in its *sampling* space and
 ``log_prob(theta)``: (N, d) -> (N,), ``-inf`` outside the bounds and never NaN.
-Samplers rely on nothing else; ``partition``, ``residuals`` and ``to_natural``
-are optional extras that some samplers use when present.
+Samplers rely on nothing else; ``partition``, ``residuals``,
+``residuals_and_jacobians`` and ``to_natural`` are optional extras that some
+samplers use when present (:func:`has_residual_jacobian`).
 """
 
 from __future__ import annotations
@@ -15,7 +16,20 @@ import numpy as np
 from mrfpe.budget import check_memory, chunk_rows
 from mrfpe.validation import check_bool
 
-__all__ = ["Target", "as_theta_batch"]
+__all__ = ["Target", "as_theta_batch", "has_residual_jacobian"]
+
+
+def has_residual_jacobian(target: Any) -> bool:
+    """Whether ``target`` offers analytic Jacobians of its residuals.
+
+    The optional extra is a method ``residuals_and_jacobians(thetas)`` returning the
+    residuals (K, m) of ``target.residuals`` at K points (K, d) and their Jacobians
+    (K, m, d) in one pass (used by ``lm_multiseed``); a target whose build decides
+    whether it can (a kernel family without the tables, say) says so in a boolean
+    attribute ``residual_jacobian``.
+    """
+    return (callable(getattr(target, "residuals_and_jacobians", None))
+            and bool(getattr(target, "residual_jacobian", True)))
 
 
 def as_theta_batch(theta: Any, d: int, name: str = "theta") -> np.ndarray:

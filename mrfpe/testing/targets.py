@@ -13,8 +13,8 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
-from mrfpe.lattice import split_ids
 from mrfpe.targets.base import Target, as_theta_batch
+from mrfpe.targets.partition import split_ids
 
 __all__ = ["BoxGaussian", "CorrelatedGaussian", "MostlyMinusInf", "TwoModes", "box_gaussian"]
 

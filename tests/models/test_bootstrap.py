@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from mrfpe import models
+from mrfpe.brdf.synthetic import make_scene
 from mrfpe.models.bootstrap import parametric_bootstrap
-from mrfpe.synthetic import make_scene
 
 
 def test_parametric_bootstrap_schema_and_spread():

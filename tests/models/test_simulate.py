@@ -17,9 +17,9 @@ import scipy.sparse as sp
 
 from mrfpe.models.discrete import FORBIDDEN, MRF, Potential
 from mrfpe.models.graph import from_adjacency, lattice
+from mrfpe.models.short_forms import gibbs_sample
 from mrfpe.models.simulate import simulate, swendsen_wang_form
 from mrfpe.models.terms import Coupling, EdgeCovariate, Field, NodeCovariate
-from mrfpe.targets.potts import gibbs_sample
 from mrfpe.threads import limit_threads
 
 
@@ -287,7 +287,7 @@ def test_init_and_schedule():
 
 
 def test_agrees_with_potts_gibbs_sample():
-    """The NumPy checkerboard sampler of mrfpe.targets.potts, in distribution."""
+    """The NumPy checkerboard sampler of mrfpe.models.short_forms, in distribution."""
     theta = np.array([0.7, 0.2, -0.3])
     design, _, _ = MRF(lattice(4), 3, [Coupling(), Field()]).compile((6, 6))
     ours = design.statistics(simulate(design, design.psi(theta[None])[0], 3000, seed=1,

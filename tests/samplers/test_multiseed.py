@@ -237,7 +237,7 @@ def test_bad_config(cls, kw, match):
 def test_concurrent_seeds_give_the_same_optima_bit_for_bit(kw):
     """Seeds run in threads, their analytic passes batched: every number as one at a time."""
     from mrfpe import brdf as B
-    from mrfpe.synthetic import make_scene
+    from mrfpe.brdf.synthetic import make_scene
     from mrfpe.targets import get
 
     u = np.array([0.6, 0.4, 0.45])

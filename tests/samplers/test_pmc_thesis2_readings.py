@@ -33,7 +33,7 @@ def readings():
 @pytest.fixture(scope="module")
 def target():
     theta = mrfpe.brdf.get("ward").to_natural(np.array([0.4, 0.6, 0.5]))
-    scene = mrfpe.synthetic.make_scene(brdf="ward", theta=theta, shape=(10, 10), n_labels=5,
+    scene = mrfpe.brdf.synthetic.make_scene(brdf="ward", theta=theta, shape=(10, 10), n_labels=5,
                                        seed=3)
     return mrfpe.targets.get("pls", scene)
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mrfpe.synthetic import make_scene
+from mrfpe.brdf.synthetic import make_scene
+from mrfpe.models.short_forms import gibbs_sample
 from mrfpe.targets import Target, get, names, softened
-from mrfpe.targets.potts import gibbs_sample
 from mrfpe.testing import CorrelatedGaussian, MostlyMinusInf, TwoModes, check_target
 
 THETA = {"lambertian": [0.6], "ward": [0.6, 0.5, 0.2], "ward_aniso": [0.6, 0.3, 0.2, 0.1],

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mrfpe.synthetic import make_scene
+from mrfpe.brdf.synthetic import make_scene
 from mrfpe.targets import get, maximise
 from mrfpe.targets.maximise import grid_points
 from mrfpe.testing import CorrelatedGaussian

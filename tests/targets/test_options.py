@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mrfpe.synthetic import make_scene
+from mrfpe.brdf.synthetic import make_scene
 from mrfpe.targets import data_kind, describe, get, names, options
 from mrfpe.targets.options import Option, resolve_options
 
@@ -72,7 +72,7 @@ def test_resolve_options_fills_defaults():
 
 
 def test_single_label_scene_is_rejected_by_pseudolikelihoods():
-    from mrfpe.scene import Scene
+    from mrfpe.brdf.scene import Scene
 
     sc = make_scene(brdf="ward", theta=[0.6, 0.5, 0.2], shape=(2, 2), n_labels=2, seed=0)
     one = Scene(image=sc.image, camera=sc.camera, light=sc.light,

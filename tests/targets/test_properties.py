@@ -7,9 +7,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from mrfpe.synthetic import make_scene
+from mrfpe.brdf.synthetic import make_scene
+from mrfpe.models.short_forms import gibbs_sample
 from mrfpe.targets import get, softened
-from mrfpe.targets.potts import gibbs_sample
 
 THETA = {"lambertian": [0.6], "ward": [0.6, 0.5, 0.2], "ward_aniso": [0.6, 0.3, 0.2, 0.1],
          "phong": [0.5, 0.4, 10.0], "phong_aniso": [0.5, 0.4, 10.0, 5.0]}

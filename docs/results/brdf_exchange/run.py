@@ -27,10 +27,10 @@ from scipy.special import logsumexp
 
 import mrfpe
 from mrfpe.models import get
-from mrfpe.models.brdf_simulate import label_field
-from mrfpe.models.label_render import term_energies
-from mrfpe.synthetic import make_scene
-from mrfpe.targets import reflectance
+from mrfpe.brdf.simulate import label_field
+from mrfpe.brdf.label_render import term_energies
+from mrfpe.brdf.synthetic import make_scene
+from mrfpe.brdf.targets import reflectance
 
 sigma, H, W, B, G = (float(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4]),
                      int(sys.argv[5]))
@@ -59,7 +59,7 @@ def log_z(theta):
     return logsumexp(la, axis=1)
 
 if len(sys.argv) > 6 and sys.argv[6] == "check":  # brute force on a tiny lattice
-    from mrfpe.models.brdf_simulate import label_energy
+    from mrfpe.brdf.simulate import label_energy
     X = np.array(list(itertools.product(range(B), repeat=K * nc)))
     th = np.array([[0.3, 0.6, 0.4], [0.7, 0.2, 0.5]])
     print([float(logsumexp(-label_energy(f, t, X))) for t in th], log_z(th))

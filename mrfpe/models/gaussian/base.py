@@ -16,10 +16,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from mrfpe.models.base import Model
 from mrfpe.targets.base import Target
 
 if TYPE_CHECKING:
-    from mrfpe.models.gaussian.model import GaussianMRF
     from mrfpe.models.gaussian.structure import CARStructure
 
 __all__ = ["GaussianTarget"]
@@ -38,7 +38,7 @@ class GaussianTarget(Target):
 
     data_kind = "fields"
 
-    def __init__(self, *, model: GaussianMRF, structure: CARStructure, x: np.ndarray,
+    def __init__(self, *, model: Model, structure: CARStructure, x: np.ndarray,
                  Z: np.ndarray, bounds: np.ndarray, estimator: str, cost: float = 1.0,
                  extra: dict | None = None) -> None:
         self.model = model

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
@@ -29,20 +29,20 @@ REPORT_AFTER_S = 2.0
 BATCH = 8
 
 
-def kernels_cached() -> bool:
-    """Whether numba's on-disk cache holds mrfpe's pseudolikelihood kernels.
+def kernels_cached(kernels: Iterable[Any] = ()) -> bool:
+    """Whether numba's on-disk cache holds ``kernels`` and PMC's mixture density.
 
-    Looks for the cache index of the main kernel and of the mixture density that
-    PMC weighs its particles with (where numba keeps them: beside
-    the module when that is writable, else the user's cache directory). False
-    when it cannot tell.
+    ``kernels`` are numba dispatchers, e.g. a target's ``compiled_kernels`` (the BRDF
+    pseudolikelihood's main kernels); the mixture density that PMC weighs its
+    particles with is always checked. Looks for each one's cache index (where numba
+    keeps them: beside the module when that is writable, else the user's cache
+    directory). False when it cannot tell.
     """
     try:
         from mrfpe import mixture
-        from mrfpe.engine import lean, lean_nodes
 
         return all(Path(k._cache._cache_file._index_path).exists()
-                   for k in (lean.lean_terms, lean_nodes.lean_terms_nodes, mixture._lse_rows))
+                   for k in (*kernels, mixture._lse_rows))
     except Exception:  # numba internals differ: assume a cold cache
         return False
 
@@ -62,7 +62,7 @@ def warm_target(target: Any, say: Callable[[str], None] | None = _stderr) -> flo
     b = np.asarray(getattr(target, "bounds", np.zeros((0, 2))), dtype=float)
     if b.ndim != 2 or b.shape[0] == 0 or not np.isfinite(b).all():
         return 0.0
-    cold = not kernels_cached()
+    cold = not kernels_cached(getattr(target, "compiled_kernels", ()))
     if cold and say is not None:
         say("compiling numerical kernels (first run only, about 20-60 s; "
             "`mrfpe warmup` does it ahead of time) ...")

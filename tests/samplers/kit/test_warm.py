@@ -25,7 +25,7 @@ class _Slow:
 
 def test_warm_target_reports_a_slow_first_call(monkeypatch):
     monkeypatch.setattr(warm, "REPORT_AFTER_S", 0.05)
-    monkeypatch.setattr(warm, "kernels_cached", lambda: True)
+    monkeypatch.setattr(warm, "kernels_cached", lambda *kernels: True)
     said: list[str] = []
     target = _Slow(0.1)
     assert warm.warm_target(target, said.append) >= 0.1
@@ -33,14 +33,14 @@ def test_warm_target_reports_a_slow_first_call(monkeypatch):
 
 
 def test_warm_target_announces_a_cold_cache(monkeypatch):
-    monkeypatch.setattr(warm, "kernels_cached", lambda: False)
+    monkeypatch.setattr(warm, "kernels_cached", lambda *kernels: False)
     said: list[str] = []
     warm.warm_target(_Slow(0.0), said.append)
     assert said and said[0].startswith("compiling numerical kernels (first run only")
 
 
 def test_fast_warm_target_is_silent(monkeypatch):
-    monkeypatch.setattr(warm, "kernels_cached", lambda: True)
+    monkeypatch.setattr(warm, "kernels_cached", lambda *kernels: True)
     said: list[str] = []
     warm.warm_target(_Slow(0.0), said.append)
     assert said == []

@@ -17,6 +17,16 @@ before checksums existed, or by another program) is accepted as it is; a
 truncated sealed file has lost its trailer, and HDF5 refuses it at once (its end
 of file lies before the address its superblock records).
 
+A damaged trailer must not pass for a missing one, or a file whose trailer and
+data were both hit would load unchecked. The last :data:`TRAILER_BYTES` bytes
+are therefore a trailer when their first 14 bytes (the prefix's place) match
+:data:`PREFIX` in all but at most :data:`MARKER_SLACK` bytes -- ten or more bytes
+of it in place by chance has a probability near 1e-21 -- and a trailer that is
+not exact in every byte (prefix, 64 lowercase hex digits, newline) is an error.
+A whole prefix elsewhere in the last 4 KiB (bytes appended after a trailer) is an
+error too. The format is unchanged, so files sealed by earlier versions read as
+before.
+
 A leaf module (hashlib and os only): :mod:`mrfpe.netcdf` calls it on every write
 and every read.
 """
@@ -26,12 +36,15 @@ from __future__ import annotations
 import hashlib
 import os
 
-__all__ = ["PREFIX", "TRAILER_BYTES", "ChecksumError", "digest", "stamp", "verify"]
+__all__ = ["MARKER_SLACK", "PREFIX", "TRAILER_BYTES", "ChecksumError", "digest", "stamp", "verify"]
 
 #: What a trailer starts with.
 PREFIX = b"\nmrfpe-sha256:"
 #: Length of a trailer: the prefix, 64 hex digits and a newline.
 TRAILER_BYTES = len(PREFIX) + 64 + 1
+#: How many bytes of the prefix's place may differ from :data:`PREFIX` for the end of a
+#: file still to count as a (damaged) trailer rather than no trailer.
+MARKER_SLACK = 4
 _CHUNK = 1 << 20
 
 
@@ -60,23 +73,33 @@ _SEARCH = 4096
 def _trailer(path: str | os.PathLike, where: str) -> tuple[int, str] | None:
     """``(bytes before the trailer, stored hex digest)``, or None for an unsealed file.
 
-    A prefix near the end that does not form a whole trailer means a sealed file
-    whose end was damaged: :class:`ChecksumError`.
+    A trailer-shaped end (its prefix within :data:`MARKER_SLACK` bytes of
+    :data:`PREFIX`) that is not exact, or a prefix elsewhere near the end, means a
+    sealed file whose end was damaged: :class:`ChecksumError`.
     """
     size = os.path.getsize(path)
     with open(path, "rb") as f:
         f.seek(max(0, size - _SEARCH))
         tail = f.read()
-    ok = tail.endswith(b"\n") and tail[-TRAILER_BYTES:].startswith(PREFIX)
-    if ok:
-        text = tail[-TRAILER_BYTES + len(PREFIX):-1]
-        ok = len(text) == 64 and all(c in b"0123456789abcdef" for c in text)
-    if ok:
-        return size - TRAILER_BYTES, text.decode("ascii")
+    end = tail[-TRAILER_BYTES:]
+    if len(end) == TRAILER_BYTES:
+        marker, text = end[:len(PREFIX)], end[len(PREFIX):-1]
+        if sum(a != b for a, b in zip(marker, PREFIX)) <= MARKER_SLACK:
+            # a trailer: any byte out of place is damage, not the absence of a seal
+            if marker != PREFIX or end[-1:] != b"\n" or not _HEX.issuperset(text):
+                raise _damaged_trailer(where)
+            return size - TRAILER_BYTES, text.decode("ascii")
     if PREFIX[1:] in tail:
-        raise ChecksumError(f"{where}: damaged file: its checksum trailer is damaged (the "
-                            f"file was changed or corrupted after it was written)")
+        raise _damaged_trailer(where)
     return None
+
+
+_HEX = frozenset(b"0123456789abcdef")
+
+
+def _damaged_trailer(where: str) -> ChecksumError:
+    return ChecksumError(f"{where}: damaged file: its checksum trailer is damaged (the file "
+                         f"was changed or corrupted after it was written)")
 
 
 def stamp(path: str | os.PathLike) -> str:

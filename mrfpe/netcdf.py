@@ -5,9 +5,11 @@ runner, :func:`mrfpe.posterior.load` and :meth:`mrfpe.brdf.scene.Scene.load` rea
 through :func:`open_dataset`, so a truncated or corrupt file gives one line --
 ``run.nc: not a readable netCDF posterior file (NetCDF: HDF error)`` -- instead
 of a bare ``OSError: HDF error`` from deep inside the HDF5 library.
-:func:`write_atomic` never leaves a partial file under the final name, seals
-every file with a checksum of its bytes (:mod:`mrfpe.checksum`) that every reader
-verifies before parsing, and names a full disk as such (:class:`DiskFullError`).
+:func:`write_atomic` refuses a path it must not replace (a directory, a named pipe,
+a device) or cannot write (a missing directory) before writing anything, never
+leaves a partial file under the final name, seals every file with a checksum of
+its bytes (:mod:`mrfpe.checksum`) that every reader verifies before parsing, and
+names a full disk as such (:class:`DiskFullError`).
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import os
 import re
 import stat
 import uuid
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -25,8 +28,8 @@ import xarray as xr
 from mrfpe.checksum import ChecksumError, stamp, verify
 
 __all__ = ["TMP_SUFFIX", "ChecksumError", "DiskFullError", "check_readable", "check_writable",
-           "disk_full", "open_dataset", "read_attrs", "tmp_path_for", "write_atomic",
-           "write_text_atomic"]
+           "describe_contents", "disk_full", "open_dataset", "read_attrs", "tmp_path_for",
+           "write_atomic", "write_text_atomic"]
 
 
 class DiskFullError(OSError):
@@ -122,47 +125,105 @@ def check_readable(path: str | os.PathLike, what: str = "input") -> Path:
 def check_writable(path: str | os.PathLike, what: str = "output") -> Path:
     """``path`` as a :class:`Path` if a file can be created there; else ``ValueError``.
 
-    The parent directory must exist (it is not created) and accept a new file:
-    the check creates and removes an empty temporary file, so permission and
-    read-only file systems are caught before any work, not after it.
+    ``path`` must be a new name or a regular file (a directory, a named pipe or a
+    device is never replaced), and its parent directory must exist (it is not
+    created) and accept a new file: the check creates and removes an empty
+    temporary file, so permission and read-only file systems are caught before
+    any work, not after it. :func:`write_atomic` runs it before every write.
+
+    Raises
+    ------
+    ValueError
+        Naming ``path`` (``what`` says what it is for) and what was found there.
+    DiskFullError
+        When not even an empty file fits on the file system.
     """
     p = Path(path)
-    if p.is_dir():
-        raise ValueError(f"{p}: {what} path is a directory; expected a file name")
-    if p.exists() and not p.is_file():
-        raise ValueError(f"{p}: {what} path is {_kind(p)}; expected a file name")
-    parent = p.parent if str(p.parent) else Path(".")
-    if not parent.is_dir():
-        raise ValueError(f"{p}: cannot write the {what} file: directory {parent} does not exist")
+    _check_replaceable(p, what)
     probe = tmp_path_for(p)
     try:
         fd = os.open(probe, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
     except OSError as exc:
+        full = disk_full(exc, p, what) if exc.errno in (errno.ENOSPC, errno.EDQUOT) else None
+        if full is not None:  # a full disk stays exit status 1, not a usage error
+            raise full from None
         raise ValueError(f"{p}: cannot write the {what} file ({exc.strerror or exc})") from None
     os.close(fd)
     os.unlink(probe)
     return p
 
 
-def open_dataset(path: str | os.PathLike, what: str = "data", **kwargs: Any) -> xr.Dataset:
+def _check_replaceable(p: Path, what: str) -> None:
+    """Refuse ``p`` unless it is a regular file or a new name in an existing directory."""
+    try:
+        mode: int | None = p.stat().st_mode
+    except (FileNotFoundError, NotADirectoryError):  # a new name: its directory decides
+        mode = None
+    except OSError as exc:  # e.g. a name too long, a loop of links
+        raise ValueError(f"{p}: cannot write the {what} file ({exc.strerror or exc})") from None
+    if mode is not None and stat.S_ISDIR(mode):
+        raise ValueError(f"{p}: {what} path is a directory; expected a file name")
+    if mode is not None and not stat.S_ISREG(mode):
+        raise ValueError(f"{p}: {what} path is {_kind(p)}, not a regular file; refusing to "
+                         "replace it")
+    parent = p.parent
+    if mode is None and not parent.is_dir():
+        found = (f"directory {parent} does not exist" if not parent.exists()
+                 else f"{parent} is not a directory")
+        raise ValueError(f"{p}: cannot write the {what} file: {found}")
+
+
+#: Attributes that mark each kind of file mrfpe writes, and the kind in words.
+_KINDS = ((("mrfpe_scene_version", "camera"), "a scene (written by Scene.save / mrfpe demo)"),
+          (("sampler",), "a posterior (written by mrfpe estimate / posterior.save)"),
+          (("study", "config_hash"), "a study trial's result (written by mrfpe study run)"))
+
+
+def describe_contents(ds: xr.Dataset) -> str:
+    """What a netCDF file holds, in words, for a message refusing it as the wrong kind.
+
+    The kind of mrfpe file its global attributes mark, else its variables (read
+    from a lazily opened ``ds``: no data is loaded).
+    """
+    for marks, kind in _KINDS:
+        if any(m in ds.attrs for m in marks):
+            return kind
+    names = [str(n) for n in ds.data_vars]
+    if not names:
+        return "no variables"
+    return "the variables " + ", ".join(names[:6]) + (", ..." if len(names) > 6 else "")
+
+
+def open_dataset(path: str | os.PathLike, what: str = "data",
+                 expect: Callable[[xr.Dataset], None] | None = None,
+                 **kwargs: Any) -> xr.Dataset:
     """Read a netCDF file fully into memory (the file is closed on return).
 
     ``kwargs`` go to :func:`xarray.open_dataset` (engine ``netcdf4`` unless
     given). A missing, truncated or corrupt file raises ``ValueError(f"{path}:
     not a readable netCDF {what} file (reason)")``: the HDF5 error surfaces
     while opening *or* while reading the data, so both are covered.
+    ``expect``, if given, is called with the opened dataset before its data is
+    read (attributes and variable names only) and raises ``ValueError`` for a
+    file of the wrong kind, so such a file is refused before the expensive part.
     """
     p = check_readable(path, what)
     kwargs.setdefault("engine", "netcdf4")
     _verified_attrs(p, what)
     try:
-        with xr.open_dataset(p, **kwargs) as f:
-            ds = f.load()
+        f = xr.open_dataset(p, **kwargs)
     except Exception as exc:
         # netCDF4 raises OSError (HDF errors) or RuntimeError (NetCDF: ...); xarray's
         # decoders anything from ValueError to AttributeError on garbage metadata.
         # All mean: not this file.
         raise _unreadable(p, what, exc) from exc
+    with f:
+        if expect is not None:
+            expect(f)  # its own message: the file reads, but is not what was asked for
+        try:
+            ds = f.load()
+        except Exception as exc:
+            raise _unreadable(p, what, exc) from exc
     return ds
 
 
@@ -232,11 +293,17 @@ def write_atomic(ds: xr.Dataset, path: str | os.PathLike, what: str = "output",
 
     Raises
     ------
+    ValueError
+        Before anything is written, when ``path`` cannot take the file
+        (:func:`check_writable`: a directory, a named pipe or a device, a missing
+        directory, no permission), naming it.
     DiskFullError
         When the file system is full, naming ``path`` (``what`` says what it is),
         instead of the HDF5 library's bare "HDF error"; nothing is left behind.
     """
-    p = Path(path)
+    # checked here, not only in the command line: os.replace would put a regular file in
+    # place of a pipe or a device, and the library's errors name the temporary file
+    p = check_writable(path, what)
     kwargs.setdefault("engine", "netcdf4")
     tmp = tmp_path_for(p)
     try:

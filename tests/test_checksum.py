@@ -153,3 +153,98 @@ def test_hdf_error_on_a_full_file_system_is_named(tmp_path, monkeypatch):
     monkeypatch.setattr(netcdf, "_free_bytes", lambda d: 1 << 40)
     with pytest.raises(RuntimeError, match="HDF error"):  # plenty of space: not a full disk
         netcdf.write_atomic(_post(), tmp_path / "p.nc")
+
+
+def _sealed_small(tmp_path: Path) -> Path:
+    path = tmp_path / "small.nc"
+    netcdf.write_atomic(xr.Dataset({"x": ("i", np.arange(4.0))}), path)
+    return path
+
+
+def test_every_single_byte_change_in_the_trailer_is_refused(tmp_path):
+    """Exhaustive: each of the trailer's bytes set to each of its 255 other values.
+
+    The audit's case: one flipped byte of the marker made a sealed file read as
+    unsealed, so damaged data behind it loaded unchecked.
+    """
+    path = _sealed_small(tmp_path)
+    data = path.read_bytes()
+    start = len(data) - checksum.TRAILER_BYTES
+    passed = []
+    with open(path, "r+b") as f:
+        for i in range(start, len(data)):
+            for value in range(256):
+                if value == data[i]:
+                    continue
+                f.seek(i)
+                f.write(bytes([value]))
+                f.flush()
+                try:
+                    checksum.verify(path)
+                    passed.append((i - start, value))
+                except checksum.ChecksumError as exc:
+                    assert str(exc).startswith(f"{path}: damaged file"), exc
+            f.seek(i)
+            f.write(data[i:i + 1])
+    assert passed == []
+    assert checksum.verify(path)  # restored: sealed and intact
+
+
+@pytest.mark.parametrize("where", range(len(checksum.PREFIX)))
+def test_a_damaged_marker_does_not_let_a_changed_value_through(tmp_path, where):
+    """The audit's exact case through every reader: a value changed *and* one byte of
+    the trailer's marker flipped (the lowest bit, e.g. ``m`` -> ``l``)."""
+    path = tmp_path / "p.nc"
+    post = _post()
+    P.save(post, path)
+    data = bytearray(path.read_bytes())
+    value = np.float64(post["theta"].values[0, 0]).tobytes()
+    at = data.index(value)
+    data[at:at + 8] = np.float64(0.5).tobytes()
+    data[len(data) - checksum.TRAILER_BYTES + where] ^= 1
+    path.write_bytes(bytes(data))
+    for read in (P.load, netcdf.read_attrs, lambda p: netcdf.open_dataset(p, "posterior")):
+        with pytest.raises(ValueError, match=rf"^{path}: damaged file: its checksum trailer"):
+            read(path)
+
+
+def test_files_sealed_by_earlier_versions_still_load(tmp_path):
+    """The trailer's format is unchanged: one appended by hand, as earlier versions did,
+    reads; so does an unsealed file."""
+    import hashlib
+
+    path = tmp_path / "old.nc"
+    _post().to_netcdf(path)
+    unsealed = path.read_bytes()
+    assert checksum.verify(path) is False
+    netcdf.read_attrs(path)
+    sealed = unsealed + b"\nmrfpe-sha256:" + hashlib.sha256(unsealed).hexdigest().encode() + b"\n"
+    path.write_bytes(sealed)
+    assert checksum.verify(path) is True
+    P.load(path)
+
+
+@pytest.mark.parametrize("tail", [
+    b"\n" + b"0123456789abcdef" * 4 + b"\n",  # a digest without a marker
+    b"\nmrfpe-sXXXXX:" + b"0" * 64 + b"\n",  # the marker five bytes away
+    b"\0" * checksum.TRAILER_BYTES,
+])
+def test_ends_far_from_a_trailer_are_unsealed(tmp_path, tail):
+    """Where recognition stops: bytes after HDF5's end of file that are not within
+    ``MARKER_SLACK`` bytes of a marker leave a file unsealed, as other programs write it."""
+    path = tmp_path / "other.nc"
+    xr.Dataset({"x": ("i", np.arange(3.0))}).to_netcdf(path)
+    path.write_bytes(path.read_bytes() + tail)
+    assert checksum.verify(path) is False
+    np.testing.assert_array_equal(netcdf.open_dataset(path)["x"].values, np.arange(3.0))
+
+
+def test_a_marker_four_bytes_away_is_a_damaged_trailer(tmp_path):
+    """The other side of the boundary: ``MARKER_SLACK`` changed bytes are still a trailer."""
+    assert checksum.MARKER_SLACK == 4
+    path = _sealed_small(tmp_path)
+    data = path.read_bytes()
+    tail = b"\nmrfpe-shXXXX:" + data[-65:]
+    path.write_bytes(data[:-checksum.TRAILER_BYTES] + tail)
+    with pytest.raises(checksum.ChecksumError, match=rf"^{path}: damaged file"):
+        checksum.verify(path)

@@ -304,11 +304,18 @@ class Scene:
         """Read a scene written by :meth:`save`.
 
         A missing, truncated, corrupt or damaged file (:func:`mrfpe.netcdf.open_dataset`),
-        or a netCDF file that is not a scene, raises ``ValueError`` naming it.
+        or a netCDF file that is not a scene, raises ``ValueError`` naming it (one
+        without an ``image`` variable is refused before its data is read, saying
+        what it holds).
         """
-        from mrfpe.netcdf import open_dataset
+        from mrfpe.netcdf import describe_contents, open_dataset
 
-        ds = open_dataset(path, "scene")
+        def expect(ds: Any) -> None:
+            if "image" not in ds.variables:
+                raise ValueError(f"{path}: not a scene file (written by Scene.save / mrfpe "
+                                 f"demo): it holds {describe_contents(ds)}")
+
+        ds = open_dataset(path, "scene", expect=expect)
         try:
             return cls.from_dataset(ds)
         except Exception as exc:  # whatever a damaged attribute makes the decoders raise

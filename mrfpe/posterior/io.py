@@ -10,6 +10,7 @@ decodes exactly those. Float NaN and ±inf (data or attributes) are kept.
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -67,9 +68,19 @@ def save(post: xr.Dataset, path: Any) -> None:
     store (bool, None, dicts, lists of strings) are stored as JSON and decoded.
     The write is atomic (:func:`mrfpe.netcdf.write_atomic`): an interrupted save
     never leaves a partial file at ``path``.
-    """
-    from mrfpe.netcdf import write_atomic
 
+    Raises
+    ------
+    ValueError
+        Before anything is written, naming ``path``, when it is a directory, a
+        named pipe or a device, or its directory is missing or not writable
+        (:func:`mrfpe.netcdf.check_writable`); nothing there is touched.
+    mrfpe.netcdf.DiskFullError
+        When the file system is full; nothing is left behind.
+    """
+    from mrfpe.netcdf import check_writable, write_atomic
+
+    check_writable(path, "posterior")  # before the copy and the encoding
     ds = post.copy()
     ds.attrs = _encode_attrs(post.attrs)
     for name, var in ds.variables.items():
@@ -80,21 +91,44 @@ def save(post: xr.Dataset, path: Any) -> None:
     write_atomic(ds, path, "posterior", format="NETCDF4")
 
 
+#: What marks a file as a posterior: read before the data, so another file is refused cheaply.
+_MARK_VARIABLE, _MARK_ATTR = "theta", "sampler"
+_NOT_A_POSTERIOR = "not a posterior file (written by mrfpe estimate / posterior.save)"
+
+
+def _expect_posterior(path: Any) -> Callable[[xr.Dataset], None]:
+    """A check for :func:`mrfpe.netcdf.open_dataset`: the file holds a posterior."""
+    from mrfpe.netcdf import describe_contents
+
+    def check(ds: xr.Dataset) -> None:
+        if _MARK_VARIABLE in ds.variables and _MARK_ATTR in ds.attrs:
+            return
+        if _MARK_ATTR in ds.attrs:  # says it is one, but lacks the samples
+            holds = f"no variable {_MARK_VARIABLE!r}"
+        else:
+            holds = describe_contents(ds)
+        raise ValueError(f"{path}: {_NOT_A_POSTERIOR}: it holds {holds}")
+
+    return check
+
+
 def load(path: Any) -> xr.Dataset:
     """Read a posterior written by :func:`save` (fully into memory; the file is closed).
 
     A missing, truncated, corrupt or damaged file (:func:`mrfpe.netcdf.open_dataset`),
-    or attributes that do not decode, raise ``ValueError`` naming it.
+    a netCDF file that holds no posterior (a scene, say: one without a ``theta``
+    variable and a ``sampler`` attribute, refused before its data is read), or
+    attributes that do not decode, raise ``ValueError`` naming it. The schema
+    itself is checked by :func:`mrfpe.posterior.validate`.
     """
     from mrfpe.netcdf import open_dataset
 
-    ds = open_dataset(path, "posterior", mask_and_scale=False, decode_times=False,
-                      decode_timedelta=False)
+    ds = open_dataset(path, "posterior", expect=_expect_posterior(path), mask_and_scale=False,
+                      decode_times=False, decode_timedelta=False)
     try:
         return _decode(ds)
     except Exception as exc:  # a damaged JSON attribute, a non-string list, ...
-        raise ValueError(f"{path}: not a posterior file (written by mrfpe estimate / "
-                         f"posterior.save): {type(exc).__name__}: {exc}") from None
+        raise ValueError(f"{path}: {_NOT_A_POSTERIOR}: {type(exc).__name__}: {exc}") from None
 
 
 def _decode(ds: xr.Dataset) -> xr.Dataset:

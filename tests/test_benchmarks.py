@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
-import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+
+from . import _processes as procs
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -14,9 +15,8 @@ ROOT = Path(__file__).resolve().parents[1]
 @pytest.mark.slow
 def test_benchmark_runner_quick():
     before = (ROOT / "benchmarks" / "RESULTS.md").read_bytes()
-    proc = subprocess.run([sys.executable, "-m", "benchmarks", "--quick", "--no-write"],
-                          cwd=ROOT, capture_output=True, text=True, timeout=600)
-    assert proc.returncode == 0, proc.stderr[-3000:]
+    proc = procs.run([sys.executable, "-m", "benchmarks", "--quick", "--no-write"], cwd=ROOT,
+                     timeout=600)
     out = proc.stdout
     for heading in ("== models ==", "== targets ==", "== samplers ==", "== stereo ==",
                     "| quarter | mrfpe", "| autologistic + covariate |"):

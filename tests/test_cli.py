@@ -37,7 +37,7 @@ def test_models_lists_every_registered_model(capsys):
 @pytest.fixture(scope="module")
 def tiny_scene(tmp_path_factory):
     from mrfpe.brdf import get
-    from mrfpe.synthetic import make_scene
+    from mrfpe.brdf.synthetic import make_scene
 
     theta = np.asarray(get("ward").to_natural(np.array([0.5, 0.4, 0.5]))).reshape(-1)
     scene = make_scene(brdf="ward", theta=theta, shape=(10, 10), n_labels=5, seed=0)

@@ -14,6 +14,8 @@ from mrfpe import study as S
 from mrfpe.experiments import importance_sampling as toy
 from mrfpe.study.config import coerce_like, parse_assignment, parse_value
 
+from .. import _processes as procs
+
 json_scalars = st.none() | st.booleans() | st.integers(-10**12, 10**12) | \
     st.floats(allow_nan=False, allow_infinity=False) | st.text(max_size=20)
 json_values = st.recursive(json_scalars, lambda inner: st.lists(inner, max_size=4)
@@ -128,11 +130,8 @@ def test_settings_and_config_must_agree():
 
 
 def test_the_library_does_not_import_the_command_line():
-    import subprocess
-    import sys
-
     code = ("import sys; from mrfpe import study as S; "
             "import mrfpe.experiments.pmc_convergence as m; "
             "S.resolve_config(m.STUDY, overrides=['n_labels=20']); "
             "assert 'mrfpe.cli' not in sys.modules, 'mrfpe.study imported mrfpe.cli'")
-    subprocess.run([sys.executable, "-c", code], check=True)
+    procs.python(code)

@@ -5,8 +5,6 @@ from __future__ import annotations
 import ast
 import dataclasses
 import os
-import subprocess
-import sys
 import textwrap
 from pathlib import Path
 
@@ -16,13 +14,13 @@ import mrfpe.experiments
 from mrfpe import study as S
 from mrfpe.study import discovery
 
+from .. import _processes as procs
+
 EXPERIMENTS = Path(mrfpe.experiments.__file__).parent
 
 
 def _run(code: str, **env: str) -> str:
-    out = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], check=True,
-                         capture_output=True, text=True, env={**os.environ, **env})
-    return out.stdout.strip()
+    return procs.python(textwrap.dedent(code), env={**os.environ, **env}).stdout.strip()
 
 
 def _defines_study(path: Path) -> bool:

@@ -10,7 +10,6 @@ from __future__ import annotations
 import dataclasses
 import os
 import signal
-import subprocess
 import sys
 import textwrap
 import time
@@ -22,6 +21,8 @@ import xarray as xr
 from mrfpe import study as S
 from mrfpe.experiments import importance_sampling as toy
 from mrfpe.netcdf import open_dataset
+
+from .. import _processes as procs
 
 SMALL = {"n_trials": 2, "n_samples": [10, 100]}
 
@@ -90,60 +91,51 @@ def slow_study(tmp_path):
     return path
 
 
-def _start(study: Path, out: Path, env: dict) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "mrfpe", "study", "run", str(study),
-                             "--out", str(out)], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, env={**os.environ, **env})
+def _start(study: Path, out: Path, env: dict) -> procs.Child:
+    return procs.Child([sys.executable, "-m", "mrfpe", "study", "run", study, "--out", out],
+                       env={**os.environ, **env})
 
 
 def test_two_processes_on_one_out_dir_never_interleave(slow_study, tmp_path):
     out, go = tmp_path / "out", tmp_path / "go"
     env = {"GO_FILE": str(go), "NUMBA_NUM_THREADS": "1"}
-    first = _start(slow_study, out, env)
-    try:
+    with _start(slow_study, out, env) as first:
         _wait_for(lambda: (out / ".lock").exists() and (out / ".lock").read_text().strip())
-        second = _start(slow_study, out, env)
-        _, err = second.communicate(timeout=120)
-        assert second.returncode == 2
+        with _start(slow_study, out, env) as second:
+            assert second.finish(timeout=120) == 2, second.stderr
+        err = second.stderr
         assert "in use by another study run" in err and f"pid {first.pid}" in err
         assert "Traceback" not in err
         go.touch()
-        _, err = first.communicate(timeout=120)
-    finally:
-        first.kill()
-    assert first.returncode == 0, err
+        assert first.finish(timeout=120) == 0, first.stderr
     names = sorted(p.name for p in (out / "trials").iterdir())
     assert names == [f"repeat={r:04d}.nc" for r in range(3)]
     for name in names:
         open_dataset(out / "trials" / name, "trial")
     # the lock is released with the process: a new run resumes (nothing to do)
-    third = _start(slow_study, out, env)
-    assert third.wait(timeout=120) == 0
-    assert "0 computed, 3 already done" in third.stdout.read()
+    with _start(slow_study, out, env) as third:
+        assert third.finish(timeout=120) == 0, third.stderr
+    assert "0 computed, 3 already done" in third.stdout
 
 
 def test_sigkill_while_writing_leaves_no_partial_result(slow_study, tmp_path):
     out, go = tmp_path / "out", tmp_path / "go"
     go.touch()
     # fsync calls: trial 0 file, its directory, then trial 1's file -> hang there
-    proc = _start(slow_study, out, {"GO_FILE": str(go), "HANG_AT_FSYNC": "3",
-                                    "NUMBA_NUM_THREADS": "1"})
-    try:
-        lines = iter(proc.stdout.readline, "")
-        assert "writing" in (line.strip() for line in lines)
+    with _start(slow_study, out, {"GO_FILE": str(go), "HANG_AT_FSYNC": "3",
+                                  "NUMBA_NUM_THREADS": "1"}) as proc:
+        proc.wait_for("stdout", lambda text: "writing" in text.split(), "'writing'",
+                      timeout=120)
         proc.send_signal(signal.SIGKILL)
-        proc.wait(timeout=60)
-    finally:
-        proc.kill()
+        assert proc.finish(timeout=60) == -signal.SIGKILL
     trials = out / "trials"
     assert sorted(p.name for p in trials.glob("*.nc")) == ["repeat=0000.nc"]
     assert len(list(trials.glob(".*.tmp"))) == 1  # the interrupted write, under a tmp name
     open_dataset(trials / "repeat=0000.nc", "trial")
     # the next run removes the stray file and computes the rest
-    rerun = _start(slow_study, out, {"GO_FILE": str(go), "NUMBA_NUM_THREADS": "1"})
-    _, err = rerun.communicate(timeout=120)
-    assert rerun.returncode == 0, err
-    assert "removed 1 temporary file(s)" in err
+    with _start(slow_study, out, {"GO_FILE": str(go), "NUMBA_NUM_THREADS": "1"}) as rerun:
+        assert rerun.finish(timeout=120) == 0, rerun.stderr
+    assert "removed 1 temporary file(s)" in rerun.stderr
     assert sorted(p.name for p in trials.iterdir()) == [f"repeat={r:04d}.nc" for r in range(3)]
 
 

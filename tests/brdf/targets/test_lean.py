@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import os
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -19,6 +17,8 @@ from mrfpe.brdf.targets import reflectance
 from mrfpe.brdf.targets.energy import energies_reference
 from mrfpe.fastmath import fexp2
 from mrfpe.targets import get
+
+from ... import _processes as procs
 
 CASES = [("ward", [0.7, 0.4, 0.45], "smooth"), ("phong", [0.5, 0.4, 0.3], "jagged"),
          ("ward_aniso", [0.7, 0.4, 0.45, 0.3], "smooth"),
@@ -77,11 +77,8 @@ def test_exp2_scalings_give_the_same_bits():
 
     assert SCALEF == ({"avx512f", "avx512vl"} <= compiled_features())
     env = {k: v for k, v in os.environ.items() if not k.startswith(("NUMBA_CPU", "MRFPE_"))}
-    here = subprocess.run([sys.executable, "-c", _EXP2_BITS], env=env, capture_output=True,
-                          text=True, check=True).stdout.split()
-    generic = subprocess.run([sys.executable, "-c", _EXP2_BITS],
-                             env={**env, "NUMBA_CPU_NAME": "generic"}, capture_output=True,
-                             text=True, check=True).stdout.split()
+    here = procs.python(_EXP2_BITS, env=env).stdout.split()
+    generic = procs.python(_EXP2_BITS, env={**env, "NUMBA_CPU_NAME": "generic"}).stdout.split()
     assert generic[0] == "False"  # a named CPU's features are not assumed
     assert here[1:] == generic[1:]
 
@@ -218,16 +215,13 @@ def test_vector_width_opt_out_and_user_setting():
     code = ("import mrfpe.brdf.engine, mrfpe.threads as t, numba; "
             "print(t.configure_vector_width(), numba.config.CPU_FEATURES is None)")
     env = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_CPU")}
-    out = subprocess.run([sys.executable, "-c", code], env={**env, "MRFPE_AVX512": "0"},
-                         capture_output=True, text=True, check=True).stdout.split()
+    out = procs.python(code, env={**env, "MRFPE_AVX512": "0"}).stdout.split()
     assert out == ["opt-out", "True"]
-    out = subprocess.run([sys.executable, "-c", code], env={**env, "NUMBA_CPU_NAME": "generic"},
-                         capture_output=True, text=True, check=True).stdout.split()
+    out = procs.python(code, env={**env, "NUMBA_CPU_NAME": "generic"}).stdout.split()
     assert out[0] == "user"
     code2 = ("import numba; numba.njit(lambda x: x)(1); import mrfpe.brdf.engine, "
              "mrfpe.threads as t; print(t.configure_vector_width())")
-    out = subprocess.run([sys.executable, "-c", code2], env=env, capture_output=True, text=True,
-                         check=True).stdout.split()
+    out = procs.python(code2, env=env).stdout.split()
     assert out == ["late"]  # numba already built its target machine: left alone
 
 

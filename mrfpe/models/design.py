@@ -34,17 +34,49 @@ from typing import Any
 
 import numpy as np
 
+from mrfpe.budget import check_memory
 from mrfpe.models.graph import Graph
 
-__all__ = ["FORBIDDEN", "MAX_BLOCK_CONFIGURATIONS", "ConditionalRows", "Design",
-           "softmax_rows_log_prob", "unique_rows"]
-
-#: The log potential that stands for -inf (a forbidden state or pair) in feature vectors:
-#: exp() of it is 0 all the same, and a zero feature times it stays 0 (0 * -inf is NaN).
-FORBIDDEN = -1e300
+__all__ = ["MAX_BLOCK_CONFIGURATIONS", "ConditionalRows", "Design", "allowed_dot",
+           "check_design_memory", "softmax_rows_log_prob", "split_forbidden", "unique_rows"]
 
 #: Largest number of joint states of one block that block pseudolikelihood enumerates.
 MAX_BLOCK_CONFIGURATIONS = 1 << 12
+
+
+def check_design_memory(q: int, n_features: int, node_rows: int, pair_rows: int,
+                        per_edge: bool = False) -> None:
+    """Refuse, before allocating, a design of ``node_rows q + pair_rows q^2`` feature vectors
+    over the memory budget (compiling holds about four copies: parts, whole, symmetry check)."""
+    nbytes = 4 * 8.0 * (node_rows * q + pair_rows * float(q) ** 2) * n_features
+    tables = f"{pair_rows} pair table{'s' if pair_rows > 1 else ''}"
+    check_memory(nbytes, f"the model with n_states={q} ({tables}{' (one per edge)' * per_edge} "
+                         f"of {q}^2 state pairs, {n_features} feature{'s' * (n_features != 1)})",
+                 "use fewer states (n_states)" + (" or a smaller graph (shape)" * per_edge))
+
+
+def split_forbidden(psi: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """``(psi with its -inf entries set to 0, their (N, P) 0/1 mask)``; mask None if none.
+
+    ``-inf`` (a forbidden state or pair) is kept apart from the finite values, not replaced
+    by a large negative number, which a finite log-potential could meet or outweigh.
+    """
+    neg = np.isneginf(psi)
+    if not neg.any():
+        return psi, None
+    return np.where(neg, 0.0, psi), neg.astype(np.float64)
+
+
+def allowed_dot(psi: np.ndarray, S: np.ndarray) -> np.ndarray:
+    """``S_u . psi_n`` (N, U) for feature counts ``S`` (U, P): ``-inf`` where ``S_u`` uses a
+    ``-inf`` (forbidden) entry of ``psi_n``, never ``0 * -inf = NaN``."""
+    psi = np.atleast_2d(np.asarray(psi, dtype=np.float64))
+    S = np.atleast_2d(np.asarray(S, dtype=np.float64))
+    fin, forbid = split_forbidden(psi)
+    out = fin @ S.T
+    if forbid is not None:
+        out[forbid @ (S != 0).T > 0] = -np.inf
+    return out
 
 
 def unique_rows(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -79,9 +111,13 @@ class ConditionalRows:
         The observed alternative.
     weight : ndarray (R,) float64
         How many times the row occurs.
+    keep_observed : bool
+        Keep ``G_obs`` (R, P), the observed alternative's design, where ``psi`` may hold
+        ``-inf``: a row whose observed alternative is forbidden is then ``-inf``.
     """
 
-    def __init__(self, G: np.ndarray, obs: np.ndarray, weight: np.ndarray) -> None:
+    def __init__(self, G: np.ndarray, obs: np.ndarray, weight: np.ndarray,
+                 keep_observed: bool = False) -> None:
         G = np.asarray(G, dtype=np.float64)
         R, K, P = G.shape
         obs = np.asarray(obs, dtype=np.int64)
@@ -91,8 +127,10 @@ class ConditionalRows:
         self.obs = obs
         self.weight = np.asarray(weight, dtype=np.float64)
         self.n_alternatives = K
-        for arr in (self.D, self.obs, self.weight):
-            arr.setflags(write=False)
+        self.G_obs = np.ascontiguousarray(G[np.arange(R), obs]) if keep_observed else None
+        for arr in (self.D, self.obs, self.weight, self.G_obs):
+            if arr is not None:
+                arr.setflags(write=False)
 
     @property
     def n_rows(self) -> int:
@@ -104,28 +142,49 @@ def softmax_rows_log_prob(groups: Sequence[ConditionalRows], psi: np.ndarray,
     """``sum_groups sum_r w_r log softmax(G_r psi)[obs_r]`` (N,), from the differences ``D``.
 
     ``log softmax(G psi)[obs] = -log(1 + sum_k exp(D_k . psi))``, evaluated stably
-    (``m = max(0, max_k D_k . psi)``) with one GEMM per chunk of rows.
+    (``m = max(0, max_k D_k . psi)``) with one GEMM per chunk of rows. ``-inf`` entries
+    of ``psi`` (forbidden) are handled apart (:func:`split_forbidden`): a forbidden
+    alternative has weight 0 and a row whose observed alternative is forbidden is ``-inf``.
     """
-    psi = np.asarray(psi, dtype=np.float64)
-    n = psi.shape[0]
-    out = np.zeros(n)
+    psi, forbid = split_forbidden(np.asarray(psi, dtype=np.float64))
+    out = np.zeros(psi.shape[0])
     psiT = np.ascontiguousarray(psi.T)
+    fT = None if forbid is None else np.ascontiguousarray(forbid.T)
     for g in groups:
-        R, K1, P = g.D.shape
+        K1 = g.D.shape[1]
         if K1 == 0:
             continue
+        if fT is not None and g.G_obs is None:
+            raise ValueError("psi holds -inf (forbidden) entries, but these conditional rows "
+                             "were built without their observed designs (keep_observed=True)")
         step = max(1, chunk // K1)
-        for a in range(0, R, step):
-            D = g.D[a:a + step]
-            r = D.shape[0]
-            d = (D.reshape(r * K1, P) @ psiT).reshape(r, K1, n)
-            if K1 == 1:
-                lse = np.logaddexp(0.0, d[:, 0])
-            else:
-                m = np.maximum(d.max(axis=1), 0.0)
-                lse = m + np.log(np.exp(-m) + np.exp(d - m[:, None, :]).sum(axis=1))
-            out -= g.weight[a:a + step] @ lse
+        for a in range(0, g.n_rows, step):
+            out -= g.weight[a:a + step] @ _rows_lse(g, slice(a, a + step), psiT, fT)
     return out
+
+
+def _rows_lse(g: ConditionalRows, sl: slice, psiT: np.ndarray,
+              fT: np.ndarray | None) -> np.ndarray:
+    """``log(1 + sum_k exp(D_k . psi))`` (r, N) of the rows ``sl``: forbidden alternatives
+    left out, ``+inf`` where the observed alternative is forbidden."""
+    D = g.D[sl]
+    r, K1, P = D.shape
+    n = psiT.shape[1]
+    d = (D.reshape(r * K1, P) @ psiT).reshape(r, K1, n)
+    obs_bad = None
+    if fT is not None:  # which alternatives use a forbidden entry: G_k = D_k + G_obs != 0
+        G_obs = g.G_obs[sl]
+        obs_bad = (G_obs != 0) @ fT > 0
+        uses = ((D + G_obs[:, None, :]) != 0).reshape(r * K1, P)
+        d[(uses @ fT).reshape(r, K1, n) > 0] = -np.inf
+    if K1 == 1:
+        lse = np.logaddexp(0.0, d[:, 0])
+    else:
+        m = np.maximum(d.max(axis=1), 0.0)
+        lse = m + np.log(np.exp(-m) + np.exp(d - m[:, None, :]).sum(axis=1))
+    if obs_bad is not None:
+        lse[obs_bad] = np.inf
+    return lse
 
 
 class Design:
@@ -173,6 +232,11 @@ class Design:
     def n_features(self) -> int:
         return int(self.node.shape[2])
 
+    @property
+    def may_forbid(self) -> bool:
+        """``psi`` may hold ``-inf`` (forbidden) entries: a general potential's tables."""
+        return self._psi is not None
+
     def psi(self, theta: np.ndarray) -> np.ndarray:
         """The feature map ``psi(theta)`` (N, P)."""
         theta = np.asarray(theta, dtype=np.float64)
@@ -211,10 +275,18 @@ class Design:
         return out
 
     def tables(self, psi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Log-potential tables at each ``psi`` row: node (N, n|1, q), pair (N, T|E, q, q)."""
+        """Log-potential tables at each ``psi`` row: node (N, n|1, q), pair (N, T|E, q, q).
+
+        An entry with a nonzero feature on a ``-inf`` (forbidden) entry of ``psi`` is
+        ``-inf``; the finite entries of ``psi`` make the rest.
+        """
         psi = np.atleast_2d(np.asarray(psi, dtype=np.float64))
-        node = np.einsum("iap,np->nia", self.node, psi)
-        pair = np.einsum("tabp,np->ntab", self.pair, psi)
+        fin, forbid = split_forbidden(psi)
+        node = np.einsum("iap,np->nia", self.node, fin)
+        pair = np.einsum("tabp,np->ntab", self.pair, fin)
+        if forbid is not None:
+            node[np.einsum("iap,np->nia", (self.node != 0) * 1.0, forbid) > 0] = -np.inf
+            pair[np.einsum("tabp,np->ntab", (self.pair != 0) * 1.0, forbid) > 0] = -np.inf
         return node, pair
 
     # -- conditional rows ------------------------------------------------------------------------
@@ -235,6 +307,9 @@ class Design:
     def _per_node_G(self, x: np.ndarray, edge_mask: np.ndarray | None = None) -> np.ndarray:
         """``(M, n, q, P)``: every node's conditional design (only edges in ``edge_mask``)."""
         M, n = x.shape
+        check_memory(16.0 * M * n * self.q * self.n_features, f"the conditional designs of "
+                     f"{M} configuration(s) of {n} nodes ({self.q} states, {self.n_features} "
+                     f"features)", "use fewer or smaller configurations")
         e = self.graph.edges
         eid = np.arange(e.shape[0]) if edge_mask is None else np.flatnonzero(edge_mask)
         pair = self.edge_pair()
@@ -264,9 +339,10 @@ class Design:
             c = cnt[first].astype(np.float64).reshape(first.size, self.graph.n_edge_types,
                                                        self.q)
             G = self.node[0][None] + np.einsum("rtb,tabp->rap", c, self.pair)
-            return ConditionalRows(np.ascontiguousarray(G), obs[first], counts.astype(float))
+            return ConditionalRows(np.ascontiguousarray(G), obs[first], counts.astype(float),
+                                   self.may_forbid)
         G = self._per_node_G(x)[:, nodes].reshape(M * nodes.size, self.q, self.n_features)
-        return ConditionalRows(G, obs, np.ones(obs.size))
+        return ConditionalRows(G, obs, np.ones(obs.size), self.may_forbid)
 
     def block_rows(self, x: np.ndarray, blocks: Sequence[np.ndarray]) -> list[ConditionalRows]:
         """Block conditionals ``log p(x_B | x_rest)`` of each block (one group per block size).
@@ -317,8 +393,8 @@ class Design:
                     for k in range(len(local)):
                         G += pair[ie[:, k]][:, Y[:, p1[k]], Y[:, p2[k]]][None]
                 else:
-                    tt = np.array([t[2] for t in local])
-                    G += pair[tt[:, None], Y[:, p1].T, Y[:, p2].T].sum(axis=0)[None, None]
+                    tt = np.array([t[2] for t in local])  # edge types: rows of self.pair
+                    G += self.pair[tt[:, None], Y[:, p1].T, Y[:, p2].T].sum(axis=0)[None, None]
             codes = np.ravel_multi_index(tuple(np.moveaxis(x[:, nodes], -1, 0)), (q,) * m_size)
             groups.setdefault(m_size, []).append(
                 (G.reshape(-1, *G.shape[2:]), codes.reshape(-1).astype(np.int64)))
@@ -329,7 +405,7 @@ class Design:
             flat = np.concatenate([G.reshape(G.shape[0], -1), obs[:, None].astype(float)], 1)
             first, counts, _ = unique_rows(flat)
             out.append(ConditionalRows(np.ascontiguousarray(G[first]), obs[first],
-                                       counts.astype(float)))
+                                       counts.astype(float), self.may_forbid))
         return out
 
 

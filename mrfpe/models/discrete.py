@@ -20,6 +20,7 @@ from which every estimator is generated (:mod:`mrfpe.models.estimators`).
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -27,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from mrfpe.models.base import Model
-from mrfpe.models.design import FORBIDDEN, Design, check_configurations
+from mrfpe.models.design import Design, check_configurations, check_design_memory
 from mrfpe.models.graph import Graph, LatticeSpec, as_graph_spec
 from mrfpe.models.options import (
     CODING_OPTION,
@@ -39,12 +40,12 @@ from mrfpe.models.options import (
     coding_nodes,
     jsonable,
 )
-from mrfpe.models.terms import EdgeCovariate, Term
+from mrfpe.models.terms import EdgeCovariate, NodeCovariate, Term
 from mrfpe.targets.base import Target
 from mrfpe.targets.options import Option, choice_check
 from mrfpe.validation import check_positive_int
 
-__all__ = ["FORBIDDEN", "MRF", "Potential"]
+__all__ = ["MRF", "Potential"]
 
 
 @dataclass(frozen=True)
@@ -60,6 +61,10 @@ class Potential:
     pair : callable (N, d) -> (N, q, q) or (N, n_edge_types, q, q)
         Log pair potential of each state pair (per edge type or shared); must be
         symmetric in the two states.
+
+    Log-potentials are finite, or ``-inf``: a forbidden state or pair, whose
+    configurations have probability zero. ``+inf`` or NaN at some theta is refused
+    (ValueError naming theta and the callable) when the potential is evaluated there.
     """
 
     params: Sequence[tuple[str, tuple[float, float]]]
@@ -141,6 +146,8 @@ class MRF(Model):
         if not isinstance(name, str) or not name:
             raise ValueError(f"name must be a non-empty string; got {name!r}")
         self.name = name
+        for t in terms or ():  # states in range, edge types the graph has
+            t.check(q, self.edge_type_names)
 
     # -- structure -------------------------------------------------------------------------------
     @property
@@ -169,8 +176,7 @@ class MRF(Model):
         out = []
         for t in self.terms:
             out += t.params(self.n_states, self.edge_type_names, covariates)
-        names = [n for n, _ in out]
-        dup = sorted({n for n in names if names.count(n) > 1})
+        dup = sorted(n for n, c in Counter(n for n, _ in out).items() if c > 1)  # O(q)
         if dup:
             raise ValueError(f"terms declare the parameter name(s) {', '.join(dup)} twice; give "
                              f"the terms distinct names")
@@ -244,6 +250,10 @@ class MRF(Model):
                     np.array([b for _, b in params], dtype=np.float64))
         cov = self._covariates(g, covariates)
         params = self._params(cov)
+        per_edge = [isinstance(t, EdgeCovariate) for t in self.terms]
+        per_node = any(isinstance(t, NodeCovariate) for t in self.terms)
+        check_design_memory(q, len(params), g.n_nodes if per_node else 1,
+                            g.n_edges if any(per_edge) else g.n_edge_types, any(per_edge))
         nodes, pairs = [], []
         for t in self.terms:
             k = t.n_params(q, self.edge_type_names, cov)
@@ -254,7 +264,6 @@ class MRF(Model):
                          else np.asarray(pd, dtype=float))
         n_rows = max(a.shape[0] for a in nodes)
         node = np.concatenate([np.broadcast_to(a, (n_rows, *a.shape[1:])) for a in nodes], -1)
-        per_edge = [isinstance(t, EdgeCovariate) for t in self.terms]
         if any(per_edge):  # one pair row per edge: expand the per-type rows of other terms
             pairs = [a if e else a[g.edge_type] for a, e in zip(pairs, per_edge, strict=True)]
         pair = np.concatenate(pairs, axis=-1)
@@ -334,8 +343,9 @@ class MRF(Model):
 
         Returns ``(n, H, W)`` on a lattice, ``(n, n_nodes)`` on a fixed graph.
         """
-        from mrfpe.models.simulate import simulate
+        from mrfpe.models.simulate import check_simulation_size, simulate
 
+        check_simulation_size(self.graph_spec, shape, n, n_sweeps, thin)  # before the graph
         design, names, _ = self.compile(shape, covariates)
         th = _one_theta(theta, names)
         draws = simulate(design, design.psi(th[None])[0], n=n, seed=seed, method=method,
@@ -370,13 +380,19 @@ def _potential_design(pot: Potential, g: Graph, q: int) -> Design:
     """Indicator design over the tables of a general potential: psi = (node (q), pair (T q q))."""
     T = g.n_edge_types
     P = q + T * q * q
+    check_design_memory(q, P, 1, T)
     node = np.zeros((1, q, P))
     node[0, np.arange(q), np.arange(q)] = 1.0
     pair = np.zeros((T, q, q, P))
-    for t in range(T):
-        for a in range(q):
-            for b in range(q):
-                pair[t, a, b, q + (t * q + a) * q + b] = 1.0
+    pair.reshape(T * q * q, P)[np.arange(T * q * q), q + np.arange(T * q * q)] = 1.0
+    # symmetrised indicators: pair[t, a, b] . psi = (T_ab + T_ba) / 2 = T_ab for symmetric tables
+    return Design(g, q, node, 0.5 * (pair + pair.transpose(0, 2, 1, 3)),
+                  _potential_psi(pot, q, T))
+
+
+def _potential_psi(pot: Potential, q: int, T: int) -> Callable[[np.ndarray], np.ndarray]:
+    """``theta (N, d) -> psi (N, q + T q q)``: the potential's tables, checked; ``-inf`` (a
+    forbidden state or pair) is kept as such: the design's users handle it explicitly."""
     d = len(pot.params)
 
     def psi(theta: np.ndarray) -> np.ndarray:
@@ -391,12 +407,25 @@ def _potential_design(pot: Potential, g: Graph, q: int) -> Design:
         if pt.shape != (n, T, q, q):
             raise ValueError(f"Potential pair must return ({n}, {q}, {q}) or ({n}, {T}, {q}, "
                              f"{q}) for a ({n}, {d}) theta batch; got {pt.shape}")
-        finite = np.isfinite(pt)
-        if not np.allclose(np.where(finite, pt, 0), np.where(finite, pt, 0).swapaxes(2, 3)):
-            raise ValueError("Potential pair must return tables symmetric in the two states")
-        # a forbidden state or pair (-inf) becomes -1e300: exp() of it is 0 all the same,
-        # and the indicator design's zeros times it stay 0 (0 * -inf would be NaN)
-        return np.maximum(np.concatenate([nt, pt.reshape(n, -1)], axis=1), FORBIDDEN)
+        _check_tables(pot, theta, nt, pt)
+        return np.concatenate([nt, pt.reshape(n, -1)], axis=1)
 
-    # symmetrised indicators: pair[t, a, b] . psi = (T_ab + T_ba) / 2 = T_ab for symmetric tables
-    return Design(g, q, node, 0.5 * (pair + pair.transpose(0, 2, 1, 3)), psi)
+    return psi
+
+
+def _check_tables(pot: Potential, theta: np.ndarray, nt: np.ndarray, pt: np.ndarray) -> None:
+    """Refuse NaN and +inf log-potentials, naming theta and the callable, and asymmetry."""
+    for what, tab in (("node", nt), ("pair", pt)):
+        bad = (np.isnan(tab) | (tab == np.inf)).reshape(tab.shape[0], -1).any(axis=1)
+        if bad.any():
+            k = int(np.flatnonzero(bad)[0])
+            th = ", ".join(f"{name}={v:.6g}" for (name, _), v in zip(pot.params, theta[k]))
+            kind = "NaN" if np.isnan(tab[k]).any() else "+inf"
+            raise ValueError(f"Potential {what} returned {kind} at theta ({th}): log-potentials "
+                             f"must be finite, or -inf to forbid a state or pair")
+    forbidden = np.isneginf(pt)
+    fin = np.where(forbidden, 0.0, pt)
+    if not (np.array_equal(forbidden, forbidden.swapaxes(2, 3))
+            and np.allclose(fin, fin.swapaxes(2, 3))):
+        raise ValueError("Potential pair must return tables symmetric in the two states (its "
+                         "-inf entries too)")

@@ -26,6 +26,7 @@ from mrfpe.models.design import (
     MAX_BLOCK_CONFIGURATIONS,
     ConditionalRows,
     Design,
+    allowed_dot,
     softmax_rows_log_prob,
 )
 from mrfpe.models.graph import Graph
@@ -156,7 +157,9 @@ class ExactTarget(ModelTarget):
 
     def _log_prob(self, theta: np.ndarray) -> np.ndarray:
         psi = self.design.psi(theta)
-        return psi @ self._stats - self.x.shape[0] * self._log_z(psi)
+        f = allowed_dot(psi, self._stats)[:, 0]  # -inf: the data hold a forbidden state or pair
+        with np.errstate(invalid="ignore"):  # -inf - (-inf) where all are forbidden: -inf
+            return np.where(f == -np.inf, -np.inf, f - self.x.shape[0] * self._log_z(psi))
 
     def describe(self) -> dict:
         return {**super().describe(), "method": self.method}
@@ -188,10 +191,16 @@ class LikelihoodTarget(ModelTarget):
         """``S(x)·psi(theta)`` (N,) for configurations ``x`` (default the data, summed)."""
         theta = as_theta_batch(theta, self.ndim)
         s = self._stats if x is None else self.sufficient_statistics(x).sum(axis=0)
-        return self.design.psi(theta) @ s
+        return allowed_dot(self.design.psi(theta), s)[:, 0]
 
     def _log_prob(self, theta: np.ndarray) -> np.ndarray:
-        return self.design.psi(theta) @ self._stats
+        return allowed_dot(self.design.psi(theta), self._stats)[:, 0]
+
+    def log_f_of_draws(self, y: Any) -> Any:
+        """``theta (N, d) -> log f(y_k | theta)`` (N, K) for configurations ``y`` (K, n):
+        their statistics once, then one product per call, ``-inf`` for a forbidden one."""
+        S = self.sufficient_statistics(y)
+        return lambda theta: allowed_dot(self.design.psi(theta), S)
 
     def simulate(self, theta: Any, n: int | None = None, *, seed: Any = None,
                  init: Any = "random", n_sweeps: int | None = None,

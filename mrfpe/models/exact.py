@@ -57,7 +57,7 @@ import numpy as np
 from scipy.special import logsumexp
 
 from mrfpe.budget import check_memory, chunk_rows
-from mrfpe.models.design import Design, unique_rows
+from mrfpe.models.design import Design, allowed_dot, unique_rows
 from mrfpe.models.graph import Graph
 
 __all__ = ["MAX_ENUMERATION", "MAX_FACTOR_ENTRIES", "LogPartition"]
@@ -305,7 +305,9 @@ class LogPartition:
         out = np.empty(N := psi.shape[0])
         if self.method == "enumerate":
             for sl in chunk_rows(N, 16.0 * self._stats.shape[0], minimum=1):
-                out[sl] = logsumexp(psi[sl] @ self._stats.T + self._log_mult[None, :], axis=1)
+                s = allowed_dot(psi[sl], self._stats)  # -inf: a forbidden configuration
+                with np.errstate(divide="ignore"):  # log 0 = -inf: every one forbidden
+                    out[sl] = logsumexp(s + self._log_mult[None, :], axis=1)
             return out
         slices = chunk_rows(N, self._row_bytes, minimum=1)
         check_memory(self._row_bytes * (slices[0].stop - slices[0].start) + 8.0 * N,

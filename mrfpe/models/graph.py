@@ -299,7 +299,8 @@ def from_adjacency(adjacency: Any, edge_type: Any = None,
     Parameters
     ----------
     adjacency : (n, n) array or scipy sparse matrix
-        Nonzero entries are edges; must be symmetric with an empty diagonal.
+        Nonzero entries are edges; must be symmetric with an empty diagonal. NaN
+        entries are refused (neither an edge nor no edge).
     edge_type : (n, n) integer array or sparse matrix, optional
         Per edge, a type ``1 .. T`` (0 or absent: no edge); defaults to one type.
     edge_type_names : tuple of str, optional
@@ -311,6 +312,7 @@ def from_adjacency(adjacency: Any, edge_type: Any = None,
             from None
     if A.ndim != 2 or A.shape[0] != A.shape[1]:
         raise ValueError(f"adjacency must be square (n, n); got shape {A.shape}")
+    _refuse_nan(A, "adjacency")
     A.eliminate_zeros()
     if A.diagonal().any():
         i = int(np.flatnonzero(A.diagonal())[0])
@@ -327,17 +329,39 @@ def from_adjacency(adjacency: Any, edge_type: Any = None,
         types = np.zeros(edges.shape[0], np.int64)
         names = edge_type_names or ("edge",)
     else:
-        T = sp.csr_matrix(edge_type)
+        try:
+            T = sp.csr_matrix(edge_type)
+        except (TypeError, ValueError):
+            raise ValueError(f"edge_type must be an (n, n) integer matrix; got "
+                             f"{type(edge_type).__name__}") from None
         if T.shape != A.shape:
             raise ValueError(f"edge_type must have the adjacency's shape {A.shape}; "
                              f"got {T.shape}")
+        _refuse_nan(T, "edge_type")
         if (T != T.T).nnz:
             raise ValueError("edge_type must be symmetric (an undirected edge has one type)")
-        types = np.asarray(T[edges[:, 0], edges[:, 1]]).ravel().astype(np.int64) - 1
+        raw = np.asarray(T[edges[:, 0], edges[:, 1]], dtype=np.float64).ravel()
+        if np.any(raw != np.round(raw)) or np.any(np.abs(raw) > 2**31):
+            k = int(np.flatnonzero((raw != np.round(raw)) | (np.abs(raw) > 2**31))[0])
+            raise ValueError(f"edge_type must hold integer types 1 .. T; edge ({edges[k, 0]}, "
+                             f"{edges[k, 1]}) has {raw[k]:g}")
+        types = raw.astype(np.int64) - 1
         if np.any(types < 0):
             raise ValueError("edge_type must give every edge a type >= 1")
         names = edge_type_names or tuple(f"type_{k + 1}" for k in range(int(types.max()) + 1))
     return Graph(A.shape[0], edges, types, tuple(names))
+
+
+def _refuse_nan(M: sp.csr_matrix, name: str) -> None:
+    """ValueError naming how many entries of ``M`` are NaN and the first (row-major)."""
+    if M.dtype.kind not in "fc" or not np.isnan(M.data).any():
+        return
+    coo = M.tocoo()
+    bad = np.flatnonzero(np.isnan(coo.data))
+    first = bad[np.lexsort((coo.col[bad], coo.row[bad]))[0]]
+    raise ValueError(f"{name} holds {bad.size} NaN entr{'y' if bad.size == 1 else 'ies'} (the "
+                     f"first at ({coo.row[first]}, {coo.col[first]})): an entry must be a "
+                     f"number, zero for no edge")
 
 
 def from_networkx(graph: Any, edge_type: str | None = None) -> Graph:
@@ -352,6 +376,9 @@ def from_networkx(graph: Any, edge_type: str | None = None) -> Graph:
         raise ImportError("from_networkx needs networkx (pip install networkx)") from exc
     if not isinstance(graph, nx.Graph) or graph.is_directed():
         raise ValueError(f"graph must be an undirected networkx.Graph; got {type(graph).__name__}")
+    if graph.is_multigraph():
+        raise ValueError(f"graph must be a simple networkx.Graph (one edge per pair of nodes); "
+                         f"got a {type(graph).__name__}")
     nodes = list(graph.nodes)
     index = {v: k for k, v in enumerate(nodes)}
     pairs, labels = [], []

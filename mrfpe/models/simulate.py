@@ -10,9 +10,12 @@ potentials: bonds join equal neighbours with probability ``1 - exp(-J_e)``, each
 takes state ``a`` with probability ``∝ exp(sum_{i in cluster} node[i, a])``. ``"auto"``:
 Swendsen-Wang where the tables allow it, else Gibbs.
 
-``-inf`` log-potentials forbid states; every draw is checked to hold none (from a random
-start under hard pair constraints a Gibbs site takes a state with the fewest forbidden
-pairs). ``numpy.random.default_rng(seed)`` draws the start and a key; the kernels compute
+``-inf`` log-potentials forbid states, and are counted apart from the finite ones (never
+stood in for by a large negative number); tables that arc consistency shows to forbid every
+configuration are refused before the run, and every draw is checked to hold none (from a
+random start under hard pair constraints a Gibbs site takes a state with the fewest
+forbidden pairs). The memory of the draws and the graph is checked before any work.
+``numpy.random.default_rng(seed)`` draws the start and a key; the kernels compute
 uniform ``s * n + i`` (node ``i``, sweep ``s``) from it with the counter-based SplitMix64
 (Steele, Lea & Flood 2014), so the draws do not depend on the number of threads.
 """
@@ -24,13 +27,15 @@ from typing import Any
 import numpy as np
 from numba import njit, prange
 
-from mrfpe.models.design import FORBIDDEN, Design, check_configurations
+from mrfpe.budget import check_memory
+from mrfpe.models.design import Design, check_configurations
+from mrfpe.models.graph import LatticeSpec, _check_shape
 from mrfpe.threads import configure_vector_width, thread_budget
 from mrfpe.validation import check_positive_int, check_seed
 
 configure_vector_width()  # before our first @njit, as mrfpe.brdf.engine does
 
-__all__ = ["METHODS", "simulate", "swendsen_wang_form"]
+__all__ = ["METHODS", "check_simulation_size", "simulate", "swendsen_wang_form"]
 
 METHODS = ("auto", "gibbs", "swendsen_wang")
 _BLOCK = 4096  # nodes per parallel chunk of a colour class
@@ -90,13 +95,42 @@ def _site(i, x, node, pair, enode, epair, indptr, nbr, ntab, u, w) -> None:
         for a in range(q):
             w[a] *= epair[row, a]
     a = _pick(w, u)
-    if a < 0:  # log-weights; each forbidden pair counts -1e300 (fewest wins)
-        w[:] = node[r]
-        for k in range(indptr[i], indptr[i + 1]):
-            for b in range(q):
-                w[b] += max(pair[ntab[k], x[nbr[k]], b], -1e300)
-        a = _draw(w, u)
-    x[i] = a
+    x[i] = a if a >= 0 else _log_site(i, r, x, node, pair, indptr, nbr, ntab, u, w)
+
+
+@njit(inline="always", cache=True)
+def _n_forbidden(i, b, x, pair, indptr, nbr, ntab) -> int:
+    """How many of node ``i``'s neighbours forbid (-inf) its state ``b``."""
+    c = 0
+    for k in range(indptr[i], indptr[i + 1]):
+        c += pair[ntab[k], x[nbr[k]], b] == -np.inf
+    return c
+
+
+@njit(cache=True)
+def _log_site(i, r, x, node, pair, indptr, nbr, ntab, u, w) -> int:
+    """Node ``i``'s state from log-weights, where every product underflowed: among the
+    states its node potential allows, those meeting the fewest forbidden (-inf) pairs (a
+    chain not yet in the support), drawn by their finite log-potentials. Forbidden entries
+    are counted apart, never summed as a large negative number a finite one could meet."""
+    q, fewest = w.size, np.int64(indptr[i + 1]) - np.int64(indptr[i]) + 1
+    for b in range(q):
+        if node[r, b] > -np.inf:
+            fewest = min(fewest, _n_forbidden(i, b, x, pair, indptr, nbr, ntab))
+    for b in range(q):
+        w[b] = -np.inf
+        if node[r, b] > -np.inf and _n_forbidden(i, b, x, pair, indptr, nbr, ntab) == fewest:
+            w[b] = node[r, b]
+            for k in range(indptr[i], indptr[i + 1]):
+                p = pair[ntab[k], x[nbr[k]], b]
+                w[b] += p if p > -np.inf else 0.0
+    a = _draw(w, u)
+    if a < 0:  # the finite log-weights overflowed (log-potentials near 1e308): the first
+        for b in range(q):
+            if node[r, b] > -np.inf and _n_forbidden(i, b, x, pair, indptr, nbr,
+                                                     ntab) == fewest:
+                return b
+    return a
 
 
 @njit(cache=True, parallel=True)
@@ -156,12 +190,8 @@ def _swendsen_wang(x, node, edges, etab, p_bond, key, slot, out) -> None:
 
 
 def _tables(design: Design, psi: Any) -> tuple[np.ndarray, np.ndarray]:
-    """Node ``(n|1, q)`` and pair ``(T|E, q, q)`` log-potentials at one ``psi``.
-
-    Log-potentials at or below ``FORBIDDEN / 10`` (:data:`mrfpe.models.design.FORBIDDEN` is
-    ``-1e300``) become ``-inf``; so does a ``-inf`` entry of ``psi`` where its
-    feature is positive (``Design.tables`` would give NaN where it is 0).
-    """
+    """Node ``(n|1, q)`` and pair ``(T|E, q, q)`` log-potentials at one ``psi``: ``-inf``
+    where a positive feature meets a ``-inf`` entry of ``psi`` (:meth:`Design.tables`)."""
     psi = np.asarray(psi, dtype=np.float64)
     if psi.shape != (design.n_features,):
         raise ValueError(f"psi must be one feature vector ({design.n_features},); got "
@@ -171,11 +201,8 @@ def _tables(design: Design, psi: Any) -> tuple[np.ndarray, np.ndarray]:
             design.node, design.pair)):
         raise ValueError("psi must hold finite numbers, or -inf (forbidden) where no feature "
                          "is negative")
-    node, pair = (t[0] for t in design.tables(np.where(fin, psi, 0.0)))
-    for tab, feat in ((node, design.node), (pair, design.pair)):  # -inf times features > 0
-        tab[(feat[..., ~fin] > 0).any(axis=-1)] = -np.inf
-    node[node <= FORBIDDEN / 10], pair[pair <= FORBIDDEN / 10] = -np.inf, -np.inf
-    return node, pair
+    node, pair = design.tables(psi[None])
+    return node[0], pair[0]
 
 
 def swendsen_wang_form(pair: np.ndarray, tol: float = 1e-9) -> tuple[np.ndarray, np.ndarray] | str:
@@ -250,17 +277,16 @@ def simulate(design: Design, psi: np.ndarray, n: int = 1, *, seed: int | None = 
         raise ValueError(f"method must be one of {', '.join(METHODS)}; got {method!r}")
     rng = np.random.default_rng(check_seed(seed))
     g, q = design.graph, design.q
+    _check_memory(g.n_nodes, g.n_edges, n, n_sweeps, thin, g.shape or (g.n_nodes,))
     node, pair = _tables(design, psi)
-    if (dead := np.flatnonzero(np.all(node == -np.inf, axis=1))).size:
-        raise ValueError(f"every state of node {dead[0]} has log-potential -inf: the model "
-                         f"has no configuration of positive probability")
+    etab = np.arange(g.n_edges) if design.pair_per_edge else g.edge_type
+    _check_support(design, node, pair, etab)
     form = None if method == "gibbs" else swendsen_wang_form(pair)
     if method == "swendsen_wang" and isinstance(form, str):
         raise ValueError(f"method='swendsen_wang' needs ferromagnetic Potts pair tables "
                          f"(J [a == b] + per-state terms, J >= 0): {form}")
     x = _init(init, design, node, rng)
     key = rng.integers(2**64, dtype=np.uint64)  # seeds the kernels' SplitMix64
-    etab = np.arange(g.n_edges) if design.pair_per_edge else g.edge_type
     out = np.empty((n, g.n_nodes), dtype=np.int64)
     when = n_sweeps + thin * np.arange(n)  # draw k: the state after sweep when[k]
     slot = np.full(when[-1], -1, dtype=np.int64)  # slot[s]: the draw taken after sweep s + 1
@@ -287,9 +313,87 @@ def simulate(design: Design, psi: np.ndarray, n: int = 1, *, seed: int | None = 
     hard = not np.all(np.isfinite(pair))  # then check that every draw is in the support
     if bad := [k for k, xk in enumerate(out)
                if hard and np.isneginf(pair[etab, xk[e[:, 0]], xk[e[:, 1]]]).any()]:
-        raise ValueError(f"draw {bad[0]} holds a forbidden pair of states (-inf): the chain has "
-                         f"not reached the support; raise n_sweeps or give an init in it")
+        raise ValueError(f"draw {bad[0]} holds a forbidden pair of states (-inf) after "
+                         f"{n_sweeps + thin * bad[0]} sweeps: either the chain has not reached "
+                         f"the support (raise n_sweeps, or give an init in it) or the pair "
+                         f"constraints admit no configuration at all (e.g. too few states to "
+                         f"colour the graph): check the potential's -inf entries")
     return out
+
+
+#: Bytes of simulation work per node and per edge beyond the draws: the graph, its colouring
+#: and neighbour lists, the tables' indices (measured on 4- and 8-neighbour lattices with
+#: tracemalloc: about 50 a node and 110 an edge), with a margin.
+_BYTES_PER_NODE, _BYTES_PER_EDGE = 64.0, 256.0
+
+
+def _check_memory(n_nodes: int, n_edges: int, n: int, n_sweeps: int, thin: int,
+                  shape: tuple[int, ...]) -> None:
+    """Refuse, before any work, a simulation whose draws, sweep schedule and graph exceed
+    the memory budget, naming ``n`` and ``shape``."""
+    nbytes = (_BYTES_PER_NODE * n_nodes + _BYTES_PER_EDGE * n_edges + 8.0 * n * n_nodes
+              + 8.0 * (n_sweeps + (thin + 1) * n))
+    check_memory(nbytes, f"simulate(n={n}, shape={tuple(shape)}): {n} draw(s) of {n_nodes} "
+                         f"nodes and {n_edges} edges", "draw fewer (n) or smaller (shape) "
+                         "configurations")
+
+
+def check_simulation_size(spec: Any, shape: Any, n: Any, n_sweeps: Any, thin: Any) -> None:
+    """:func:`simulate`'s memory check, from a model's graph rule before its graph is built.
+
+    ``spec`` is a :class:`~mrfpe.models.graph.LatticeSpec` (its edges bounded by one per
+    node and offset) or a :class:`~mrfpe.models.graph.Graph`; a lattice without a
+    ``shape`` is left to the model's own error.
+    """
+    n, n_sweeps = check_positive_int("n", n), check_positive_int("n_sweeps", n_sweeps, 0)
+    thin = check_positive_int("thin", thin)
+    if isinstance(spec, LatticeSpec):
+        if shape is None:
+            return
+        H, W = _check_shape(shape)
+        _check_memory(H * W, H * W * len(spec.offsets), n, n_sweeps, thin, (H, W))
+    else:
+        _check_memory(spec.n_nodes, spec.n_edges, n, n_sweeps, thin, (spec.n_nodes,))
+
+
+def _check_support(design: Design, node: np.ndarray, pair: np.ndarray,
+                   etab: np.ndarray, rounds: int = 20) -> None:
+    """Refuse tables that forbid every configuration, where arc consistency shows it.
+
+    A node's state survives a round if its node potential allows it and every
+    neighbour keeps an allowed state that the joining pair table allows with it (AC-3;
+    Mackworth 1977, in vectorised rounds). A node left with no state proves the support
+    empty; rounds that remove nothing, or ``rounds`` of them, end the check (a support it
+    does not refute may still be empty: the draws are checked after the run).
+    """
+    g, q = design.graph, design.q
+    allowed = np.array(np.broadcast_to(node > -np.inf, (g.n_nodes, q)))
+    if (dead := np.flatnonzero(~allowed.any(axis=1))).size:
+        raise ValueError(f"every state of node {dead[0]} has log-potential -inf: the model "
+                         f"has no configuration of positive probability")
+    if np.all(np.isfinite(pair)):
+        return
+    ok, e = (pair > -np.inf).astype(np.float64), g.edges  # symmetric, as the tables are
+    for _ in range(rounds):
+        keep = allowed.copy()
+        for s, d in ((0, 1), (1, 0)):  # the states of e[:, s] that e[:, d] can meet
+            met = np.empty((g.n_edges, q), dtype=bool)
+            if design.pair_per_edge:
+                met[:] = np.einsum("eab,eb->ea", ok, allowed[e[:, d]]) > 0
+            else:
+                for t in range(ok.shape[0]):
+                    on = etab == t
+                    met[on] = allowed[e[on, d]] @ ok[t] > 0
+            for a in range(q):
+                keep[:, a] &= np.bincount(e[:, s], ~met[:, a], g.n_nodes) == 0
+        if (dead := np.flatnonzero(~keep.any(axis=1))).size:
+            raise ValueError(f"the potentials forbid every configuration: no state of node "
+                             f"{dead[0]} is allowed by its node potential together with its "
+                             f"neighbours' pair potentials (-inf entries), so the model has "
+                             f"no configuration of positive probability")
+        if np.array_equal(keep, allowed):
+            return
+        allowed = keep
 
 
 def _exp_rows(t: np.ndarray) -> np.ndarray:

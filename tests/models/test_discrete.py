@@ -73,6 +73,14 @@ def _cases():
         return lambda x: J * sum(x[i] == x[j] for i, j, _ in pairs) + h[x].sum()
     out.append(("potts8", models.potts(3, 8), (3, 3), np.array([0.6, -0.3, 0.4]), None, potts8))
 
+    # one coupling per direction of the 8-neighbourhood: the block pseudolikelihood must
+    # take each internal edge's table by its type (the antidiagonal is not edge 3's type)
+    def potts8_dir(th, cov, H=3, W=3):
+        pairs = list(_lattice_pairs(H, W, off8))
+        return lambda x: sum(th[t] * (x[i] == x[j]) for i, j, t in pairs)
+    out.append(("potts8_dir", MRF(lattice(8, directional=True), 2, [Coupling(by_type=True)]),
+                (3, 3), np.array([0.5, -0.2, 0.3, 0.9]), None, potts8_dir))
+
     # Ising in spins with separate horizontal/vertical couplings and a node covariate
     z = RNG.normal(size=(3, 4))
 
@@ -185,7 +193,7 @@ def test_estimators_against_brute_force(case):
 
 
 def test_batched_rows_are_independent():
-    _name, m, shape, theta, cov, _energy = CASES[1]
+    _name, m, shape, theta, cov, _energy = CASES[2]
     x = RNG.integers(0, 2, shape)
     t = m.target("pl", x, covariates=cov)
     th = theta + RNG.normal(scale=0.1, size=(9, theta.size))

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from mrfpe.models.discrete import FORBIDDEN, MRF, Potential
+from mrfpe.models.discrete import MRF, Potential
 from mrfpe.models.graph import from_adjacency, lattice
 from mrfpe.models.short_forms import gibbs_sample
 from mrfpe.models.simulate import simulate, swendsen_wang_form
@@ -178,7 +178,7 @@ def test_forbidden_states_are_never_drawn():
     pot, pair_tab = _colouring_potential(np.array([0.0, 0.2, -0.3]))
     design, _, _ = MRF(lattice(4), 3, potential=pot).compile((2, 3))
     psi = design.psi(np.array([[0.5]]))[0]
-    assert psi.min() <= FORBIDDEN  # the model's stand-in for -inf
+    assert np.isneginf(psi).any()  # forbidden entries stay -inf (no finite stand-in)
     x = simulate(design, psi, 12000, seed=6, n_sweeps=20, thin=3)  # auto: Gibbs
     e = design.graph.edges
     assert np.all(x[:, e[:, 0]] != x[:, e[:, 1]])
@@ -207,26 +207,28 @@ def test_unreachable_support_is_reported():
     pot, _ = _colouring_potential(np.array([0.0, 0.0, -np.inf]))
     g = from_adjacency(np.ones((3, 3)) - np.eye(3))
     design, _, _ = MRF(g, 3, potential=pot).compile()
-    with pytest.raises(ValueError, match=r"forbidden pair.*raise n_sweeps"):
+    with pytest.raises(ValueError, match=r"forbidden pair.*raise n_sweeps.*or the pair "
+                                         r"constraints admit no configuration"):
         simulate(design, design.psi(np.array([[0.5]]))[0], seed=0, n_sweeps=5)
 
 
 DELTA = np.array([[0.0, 0.3, -0.2], [0.3, 0.0, 0.5], [-0.2, 0.5, 0.0]])
 
 
-@pytest.mark.parametrize("case", ["products", "underflow", "forbidden"])
+@pytest.mark.parametrize("case", ["products", "underflow", "forbidden", "tied"])
 def test_site_update_is_the_full_conditional(case):
     """One Gibbs site update against its conditional computed here, with stratified
     uniforms (u = (k + 1/2) / N: the drawn frequencies are the CDF's steps to 1/N).
 
     ``products``: the fast path; ``underflow``: every state's product underflows, so
     log-weights decide; ``forbidden``: every state has a -inf pair (a start outside the
-    support), so the states with the fewest of them are drawn, uniformly.
+    support), so the state with the fewest of them is drawn; ``tied``: every state has
+    two, and their finite log-potentials (here the node's) decide among them.
     """
     from mrfpe.models.simulate import _exp_rows, _site
 
     node = np.array([[0.0, 0.5, -0.3]])
-    off = {"products": -1.0, "underflow": -400.0, "forbidden": -np.inf}[case]
+    off = {"products": -1.0, "underflow": -400.0, "forbidden": -np.inf, "tied": -np.inf}[case]
     pair = (np.where(np.eye(3) == 1, 0.0, off) + DELTA)[None]
     if case == "forbidden":
         pair[0, 1, 1] = pair[0, 2, 2] = -np.inf  # state 0 now meets the fewest forbidden pairs
@@ -235,6 +237,8 @@ def test_site_update_is_the_full_conditional(case):
     lw = node[0] + pair[0][:, [0, 1, 2]].sum(axis=1)
     if case == "forbidden":
         p = np.array([1.0, 0.0, 0.0])
+    elif case == "tied":
+        p = np.exp(node[0]) / np.exp(node[0]).sum()
     else:
         assert case == "products" or np.all(np.exp(lw) == 0)  # products would underflow
         p = np.exp(lw - lw.max()) / np.exp(lw - lw.max()).sum()
@@ -346,12 +350,11 @@ def test_bad_design_and_psi():
         simulate(design, np.array([-np.inf]))
 
 
-def test_minus_inf_in_psi_is_forbidden_like_the_models_stand_in():
-    """psi = -inf (here hand-made) draws as the model's FORBIDDEN (-1e300) does."""
+def test_minus_inf_in_psi_draws_as_the_potentials_minus_inf():
+    """A hand-made -inf in psi forbids as the potential's own -inf does."""
     pot, _ = _colouring_potential(np.array([0.0, 0.2, -0.3]))
     design, _, _ = MRF(lattice(4), 3, potential=pot).compile((2, 3))
     psi = design.psi(np.array([[0.5]]))[0]
-    with_inf = np.where(psi <= FORBIDDEN, -np.inf, psi)
-    assert np.isneginf(with_inf).any()
-    np.testing.assert_array_equal(simulate(design, with_inf, 20, seed=8, n_sweeps=10, thin=2),
+    by_hand = np.where(np.isneginf(psi), -np.inf, psi.copy())
+    np.testing.assert_array_equal(simulate(design, by_hand, 20, seed=8, n_sweeps=10, thin=2),
                                   simulate(design, psi, 20, seed=8, n_sweeps=10, thin=2))

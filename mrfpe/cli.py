@@ -3,7 +3,8 @@
 Every command checks all of its inputs (files readable and of the right kind,
 output paths writable, settings known and well-typed) before its first
 expensive step. Usage and input errors print one line, ``mrfpe CMD: error:
-...``, and exit with status 2; ``--debug`` shows the traceback instead.
+...``, and exit with status 2; ``--debug`` shows the traceback instead. A
+third-party plugin that fails prints one such line naming it, and exits with 1.
 """
 
 from __future__ import annotations
@@ -153,6 +154,7 @@ def _estimate(args: argparse.Namespace) -> int:
 
 
 def _compare(args: argparse.Namespace) -> int:
+    from mrfpe.distances import distance
     from mrfpe.distances import get as get_distance
 
     params = parse_assignments(args.param, "--param")
@@ -160,9 +162,10 @@ def _compare(args: argparse.Namespace) -> int:
     check_keywords(params, keyword_names(cls.__call__, 3), f"distance {args.distance!r}",
                    "--param")
     a, b = _load_posterior(args.a), _load_posterior(args.b)
-    dist = cls()
-    value = float(dist(a, b, **params))
-    what = "similarity" if getattr(dist, "kind", "distance") == "similarity" else "distance"
+    # the result checked (a number, not NaN, not negative if declared nonnegative), and a
+    # plugin's own failure reported as the plugin's, naming it
+    value = distance(args.distance, a, b, **params)
+    what = "similarity" if getattr(cls, "kind", "distance") == "similarity" else "distance"
     print(f"{args.distance} {what} between {args.a} and {args.b}: {value} (no unit)")
     return 0
 
@@ -338,7 +341,8 @@ def _add_study_verify(st_sub: Any) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the command line; returns the exit status (0 ok, 1 failed trials, 2 bad input)."""
+    """Run the command line; returns the exit status (0 ok, 1 failed trials, a full disk or
+    a failing plugin, 2 bad input)."""
     args = build_parser().parse_args(argv)
     try:
         return int(args.func(args) or 0)
@@ -360,7 +364,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except Exception as exc:  # a bug or an environment failure, not bad input
         if args.debug:
             raise
-        if getattr(exc, "errno", None) in (errno.ENOSPC, errno.EDQUOT):  # a full disk: say so
+        from mrfpe._plugins import PluginError
+
+        # a full disk, or a third-party plugin failing (its message names it): say so
+        if isinstance(exc, PluginError) or getattr(exc, "errno", None) in (errno.ENOSPC,
+                                                                            errno.EDQUOT):
             print(f"mrfpe {args.command}: error: {exc}", file=sys.stderr)
             return 1
         print(f"mrfpe {args.command}: internal error: {type(exc).__name__}: {exc} "

@@ -58,6 +58,7 @@ import numpy as np
 import xarray as xr
 
 from mrfpe._caller import stacklevel_outside_mrfpe
+from mrfpe.distances.registry import NEGATIVE_TOLERANCE
 from mrfpe.resampling import check_log_weights, normalise_log_weights
 from mrfpe.validation import check_bool, check_n_jobs
 
@@ -243,8 +244,9 @@ class Distance:
         """Distance form between posteriors ``a`` and ``b`` (lower = more alike).
 
         Raises ``ValueError`` for bad inputs (module docstring), and when the
-        computation breaks down (a singular matrix, a NaN result) rather than
-        return a number that means nothing.
+        computation breaks down (a singular matrix, a NaN result, a negative one
+        beyond rounding while ``nonnegative``) rather than return a number that
+        means nothing.
         """
         (fa, fb), p = self.prepare([a, b], ("a", "b"), **params)
         try:
@@ -255,6 +257,9 @@ class Distance:
         if np.isnan(value):
             raise ValueError(f"{self._label()}: the distance is NaN for these posteriors "
                              "(an overflow or a degenerate covariance)")
+        if self.nonnegative and value < -NEGATIVE_TOLERANCE:
+            raise ValueError(f"{self._label()}: the distance is {value!r}, negative, though "
+                             f"{type(self).__name__}.nonnegative is True")
         return value
 
     def pairwise(self, posteriors: Sequence[Any], *, n_jobs: int = 1, progress: bool = False,

@@ -13,20 +13,28 @@ the entry point loads a class that
 
 Anything else is listed as broken, with the reason. The listing
 (:meth:`DistanceRegistry.table`, i.e. ``mrfpe distances``) shows each
-entry's kind, symmetry and parameters with their defaults.
+entry's kind, symmetry and parameters with their defaults. What a distance
+returns through the front doors is checked (:func:`check_value`): a number,
+not NaN, and not negative if it declares ``nonnegative`` (the default).
 """
 
 from __future__ import annotations
 
 import inspect
+import math
 from collections.abc import Callable, Mapping
 from typing import Any
 
-from mrfpe._plugins import PluginInfo, Registry, check_no_arg_constructible
+from mrfpe._plugins import PluginInfo, Registry, check_no_arg_constructible, short_repr
 
-__all__ = ["DistanceRegistry", "describe", "registry", "validate_distance"]
+__all__ = ["NEGATIVE_TOLERANCE", "DistanceRegistry", "check_value", "describe", "registry",
+           "validate_distance"]
 
 KINDS = ("distance", "similarity")
+
+#: How far below zero rounding may bring a distance that declares ``nonnegative``
+#: (such a value is returned as it is; anything lower is refused).
+NEGATIVE_TOLERANCE = 1e-9
 
 
 def _own_attr(cls: type, attr: str) -> bool:
@@ -81,3 +89,29 @@ class DistanceRegistry(Registry):
 
 
 registry = DistanceRegistry("mrfpe.distances", "distance", validate_distance)
+
+
+def check_value(info: PluginInfo, value: Any) -> float:
+    """``value``, returned by distance ``info``, as a float once checked.
+
+    Raises
+    ------
+    ValueError
+        Naming the plugin and the value, if the value is not a number, is NaN, or
+        is negative (below ``-NEGATIVE_TOLERANCE``) while the class declares
+        ``nonnegative`` (true unless it says otherwise, as for :class:`Distance`).
+    """
+    label = registry.label(info)
+    try:
+        v = float(value)
+    except Exception:  # whatever a plugin's object raises on float()
+        raise ValueError(f"{label} returned {type(value).__name__} {short_repr(value)}, not "
+                         "a number") from None
+    if math.isnan(v):
+        raise ValueError(f"{label} returned NaN: the distance means nothing for these "
+                         "posteriors")
+    if v < -NEGATIVE_TOLERANCE and getattr(info.obj, "nonnegative", True):
+        raise ValueError(f"{label} returned {v!r}, a negative distance, though it declares "
+                         "nonnegative (a class whose distance form can be negative sets "
+                         "nonnegative = False)")
+    return v

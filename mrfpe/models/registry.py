@@ -5,6 +5,12 @@ a factory function -- whose every parameter has a default, and which returns
 a :class:`~mrfpe.models.base.Model`. Built-in models register through the
 same group (``pyproject.toml``); a broken plugin is listed with its reason and
 never breaks the others.
+
+Discovery calls each entry point's factory once with no arguments
+(:func:`check_model_factory`): only a build says whether it returns a model, the
+contract already requires a no-argument build, and the built-ins' builds take
+microseconds and import nothing. A listing runs it first in its probe process for
+a third-party plugin, so a build that hangs or ends the process is caught there.
 """
 
 from __future__ import annotations
@@ -12,10 +18,10 @@ from __future__ import annotations
 import inspect
 from typing import Any
 
-from mrfpe._plugins import Registry
+from mrfpe._plugins import Registry, short_repr
 from mrfpe.models.base import Model
 
-__all__ = ["get", "names", "registry", "validate_model"]
+__all__ = ["check_model_factory", "get", "names", "registry", "validate_model"]
 
 
 def validate_model(obj: Any) -> None:
@@ -36,7 +42,27 @@ def validate_model(obj: Any) -> None:
                         f"arguments; parameters without defaults: {', '.join(required)}")
 
 
-registry = Registry("mrfpe.models", "model", validate_model)
+def _not_a_model(what: str, model: Any) -> TypeError:
+    return TypeError(f"{what} returned {type(model).__name__} {short_repr(model)}, not an "
+                     f"mrfpe.models.Model")
+
+
+def check_model_factory(obj: Any) -> None:
+    """Raise ``TypeError`` unless calling ``obj`` with no arguments returns a Model.
+
+    Run on discovery of a model entry point, after :func:`validate_model`; the
+    error says what the call raised or returned.
+    """
+    what = f"{getattr(obj, '__name__', 'the factory')}()"
+    try:
+        model = obj()
+    except Exception as exc:
+        raise TypeError(f"{what} raised {type(exc).__name__}: {exc}") from None
+    if not isinstance(model, Model):
+        raise _not_a_model(what, model)
+
+
+registry = Registry("mrfpe.models", "model", validate_model, check_model_factory)
 
 
 def names() -> list[str]:
@@ -47,21 +73,31 @@ def names() -> list[str]:
 def get(name: str, /, **kwargs: Any) -> Model:
     """The model registered as ``name``, built with ``kwargs`` (say ``n_states=3``).
 
+    Only the entry point registered as ``name`` is imported.
+
     Raises
     ------
     ValueError
-        For an unknown or broken name (listing the available ones).
+        For an unknown name (listing the registered ones), a broken plugin (naming it,
+        its entry point and package, and why), settings it does not take, or a bad
+        setting value.
     TypeError
-        If the plugin does not return a Model.
+        If the plugin does not return a Model (the message names it).
+    mrfpe._plugins.PluginError
+        If a third-party plugin fails otherwise while building (the message names it).
     """
-    factory = registry.get(name)
+    info = registry.info(name)
+    factory = info.obj
     try:
-        model = factory(**kwargs)
+        inspect.signature(factory).bind(**kwargs)
     except TypeError as exc:
         params = ", ".join(inspect.signature(factory).parameters)
         raise ValueError(f"model {name!r} takes {params or 'no settings'}; got "
                          f"{', '.join(kwargs) or 'none'} ({exc})") from None
+    except ValueError:  # pragma: no cover - no signature to check against
+        pass
+    with registry.calling(info):
+        model = factory(**kwargs)
     if not isinstance(model, Model):
-        raise TypeError(f"model plugin {name!r} returned {type(model).__name__}, not an "
-                        f"mrfpe.models.Model")
+        raise _not_a_model(registry.label(info), model)
     return model

@@ -43,19 +43,23 @@ def names() -> tuple[str, ...]:
 
 
 def target_class(name: str) -> type:
-    """The class registered as ``name`` (ValueError listing the names, nearest first)."""
+    """The class registered as ``name``, importing no other target plugin (ValueError
+    listing the names, nearest first, for an unknown one; naming the reason for a broken
+    one)."""
     import difflib
 
     from mrfpe.targets.registry import registry
 
+    if isinstance(name, str):
+        try:
+            return registry.info(name).obj
+        except ValueError as exc:
+            if "is broken" in str(exc):  # known but broken: its reason, not the names
+                raise
     known = names()
-    if not isinstance(name, str) or name not in known:
-        close = difflib.get_close_matches(str(name), known, n=1)
-        hint = f" (did you mean {close[0]!r}?)" if close else ""
-        broken = registry.errors().get(str(name))
-        why = f" (its plugin is broken: {broken})" if broken else ""
-        raise ValueError(f"name must be one of {', '.join(known)}; got {name!r}{hint}{why}")
-    return registry.get(name)
+    close = difflib.get_close_matches(str(name), known, n=1)
+    hint = f" (did you mean {close[0]!r}?)" if close else ""
+    raise ValueError(f"name must be one of {', '.join(known)}; got {name!r}{hint}")
 
 
 def options(name: str) -> tuple[Option, ...]:

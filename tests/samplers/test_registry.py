@@ -1,7 +1,6 @@
 """The sampler registry: discovery, validation, broken plugins, CLI listing."""
 
 import importlib.metadata as md
-import subprocess
 import sys
 import types
 import warnings
@@ -13,6 +12,8 @@ import mrfpe._plugins as plugins
 import mrfpe.samplers as samplers
 from mrfpe import cli
 from mrfpe.samplers.registry import validate_sampler
+
+from .. import _processes as procs
 
 BUILTINS = {"pmc", "sir", "ppf", "mh", "dw_q", "dw_r", "emcee", "lm_multiseed",
             "nlopt_multiseed"}
@@ -138,7 +139,7 @@ def test_listing_does_not_import_heavy_dependencies():
     code = ("import sys, mrfpe.samplers as s; s.table(); heavy = ['emcee', 'nlopt', 'ot', "
             "'cv2', 'skimage', 'dask', 'matplotlib', 'sklearn', 'arviz']; "
             "print(','.join(m for m in heavy if m in sys.modules))")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    out = procs.python(code)
     assert out.stdout.strip() == "", f"listing imported {out.stdout.strip()}"
 
 

@@ -21,23 +21,30 @@ Every target is a batched :class:`mrfpe.targets.Target`, so every sampler and
 :func:`ising`, :func:`autologistic`, :func:`autonormal` and the thesis's
 ``"brdf"``; all are registered under the ``mrfpe.models`` entry-point group
 (:func:`get`, :func:`names`), as third-party models are.
+
+Hidden fields: ``models.hidden(mrf, emission)`` declares a discrete MRF over hidden
+labels seen through an emission of :mod:`mrfpe.models.emissions` (``models.emissions.
+gaussian()``, ``poisson()``, ``categorical()``, ``general(...)``); the ``hidden``
+sampler draws its posterior (:mod:`mrfpe.models.hidden`).
 """
 
 from __future__ import annotations
 
 from typing import Any
 
+from mrfpe.models import emissions
 from mrfpe.models.base import Model
 from mrfpe.models.discrete import MRF, Potential
 from mrfpe.models.graph import Graph, LatticeSpec, from_adjacency, from_networkx, lattice
+from mrfpe.models.hidden.model import hidden  # bound after the package: models.hidden is it
 from mrfpe.models.library import autologistic, ising, potts
 from mrfpe.models.registry import get, names, registry
 from mrfpe.models.terms import Coupling, EdgeCovariate, Field, NodeCovariate, Term
 
 __all__ = ["MRF", "Coupling", "EdgeCovariate", "Field", "Graph", "LatticeSpec", "Model",
-           "NodeCovariate", "Potential", "Term", "autologistic", "autonormal",
-           "from_adjacency", "from_networkx", "get", "ising", "lattice", "names", "potts",
-           "registry"]
+           "NodeCovariate", "Potential", "Term", "autologistic", "autonormal", "emissions",
+           "from_adjacency", "from_networkx", "get", "hidden", "ising", "lattice", "names",
+           "potts", "registry"]
 
 
 def autonormal(*args: Any, **kwargs: Any) -> Model:

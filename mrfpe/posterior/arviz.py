@@ -42,7 +42,9 @@ def to_arviz(post: Any, *, resample_to_equal: bool = True, seed: int | None = 0)
     ``lp`` (the target log density) in ``sample_stats``. A posterior with
     ``chain(sample)`` and equal weights (MCMC) gets one ArviZ chain per chain, in
     draw order; otherwise there is one chain. The MAP trace and the ESS per step
-    go to an extra ``trace`` group; the attributes are copied.
+    go to an extra ``trace`` group, variables over neither ``sample`` nor ``step`` (a
+    sampler's summaries, such as the ``hidden`` sampler's ``label_probability``) to an
+    extra ``summary`` group; the attributes are copied.
 
     Raises
     ------
@@ -76,6 +78,10 @@ def to_arviz(post: Any, *, resample_to_equal: bool = True, seed: int | None = 0)
                         "lp": (("chain", "draw"), src["log_target"].values[layout])},
                        coords={k: coords[k] for k in ("chain", "draw")})
     trace = src[["map_theta", "map_log_target", "ess"]]
-    with warnings.catch_warnings():  # arviz warns about the non-standard "trace" group
+    groups = {"posterior": posterior, "sample_stats": stats, "trace": trace}
+    summary = [k for k, v in src.data_vars.items() if not {"sample", "step"} & set(v.dims)]
+    if summary:  # a sampler's summaries (e.g. the hidden sampler's label probabilities)
+        groups["summary"] = src[summary]
+    with warnings.catch_warnings():  # arviz warns about the non-standard groups
         warnings.simplefilter("ignore", UserWarning)
-        return az.InferenceData(posterior=posterior, sample_stats=stats, trace=trace)
+        return az.InferenceData(**groups)

@@ -4,13 +4,15 @@
 - :mod:`mrfpe.testing.accuracy`: the two checks no declaration can skip or loosen
   (:func:`check_gaussian_moments` with ESS-derived tolerances, :func:`check_diagnostics`);
 - :mod:`mrfpe.testing.targets`: the analytic targets they run on;
-- :mod:`mrfpe.testing.model_checks`: :func:`check_model` for declared models.
+- :mod:`mrfpe.testing.model_checks`: :func:`check_model` for declared models;
+- :mod:`mrfpe.testing.emission_checks`: :func:`check_emission` for emissions of hidden MRFs.
 
 Everything is re-exported here, so ``from mrfpe.testing import check_sampler`` works.
 """
 
 from __future__ import annotations
 
+from mrfpe.testing.emission_checks import EMISSION_CHECKS, check_emission
 from mrfpe.testing.model_checks import check_model
 from mrfpe.testing.samplers import (
     CHECKS,
@@ -40,6 +42,7 @@ from mrfpe.testing.targets import (
 
 __all__ = [
     "CHECKS",
+    "EMISSION_CHECKS",
     "BoxGaussian",
     "CorrelatedGaussian",
     "MostlyMinusInf",
@@ -49,6 +52,7 @@ __all__ = [
     "check_callback",
     "check_config",
     "check_diagnostics",
+    "check_emission",
     "check_gaussian_moments",
     "check_interface",
     "check_map_trace",

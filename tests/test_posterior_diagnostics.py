@@ -174,3 +174,81 @@ def test_a_declared_bias_is_unreliable_whatever_the_ess():
         warnings.simplefilter("ignore", PosteriorWarning)
         assert "bias" not in mrfpe.sample("sir", t, seed=0, n_samples=300,
                                           n_iterations=3).attrs
+
+
+# --- ensembles: judged by the integrated autocorrelation time, not by R̂ ---------------
+# Goodman & Weare (2010); emcee's documentation (Foreman-Mackey et al. 2013) trusts τ from a
+# chain of about 50 τ on. Any sampler opts in with chain_type="ensemble"; the expected τ
+# comes from emcee.autocorr.integrated_time on the same draws.
+
+
+def _ensemble(x, unreliable=False, **kw):
+    """A posterior of walkers x (draw, walker, param), stored step-major as samplers do."""
+    k, c, d = x.shape
+    return _post(x.reshape(-1, d), chain=np.tile(np.arange(c), k), unreliable=unreliable,
+                 extra_attrs={"chain_type": "ensemble"}, **kw)
+
+
+def _ar1_walkers(n_walkers, n_draws, rho, seed, d=2):
+    theta, _ = _ar1(n_walkers, n_draws, rho, np.random.default_rng(seed), d)
+    return theta.reshape(n_draws, n_walkers, d)
+
+
+def test_an_ensemble_of_50_tau_is_reliable_where_r_hat_across_walkers_is_not():
+    import emcee
+
+    x = _ar1_walkers(32, 1200, 0.9, seed=10)  # τ = (1 + ρ)/(1 − ρ) = 19 draws
+    tau = emcee.autocorr.integrated_time(x, tol=0)
+    assert 1200 >= 50 * tau.max()
+    d = P.diagnose(_ensemble(x))
+    assert d["reliable"] and d["messages"] == []
+    assert d["tau"] == pytest.approx(tau.max(), rel=1e-12) and 15 < d["tau"] < 23
+    assert d["ess"] == pytest.approx(32 * 1200 / tau.max(), rel=1e-12)
+    assert np.isfinite(d["ess_chain"]) and np.isfinite(d["rhat"])  # reported for comparison
+    # the same draws read as 32 independent chains: R̂ across them fails
+    d_ind = P.diagnose(_post(x.reshape(-1, 2), chain=np.tile(np.arange(32), 1200),
+                             unreliable=True))
+    assert d_ind["rhat"] > RHAT_MAX and not d_ind["reliable"] and np.isnan(d_ind["tau"])
+
+
+def test_an_ensemble_shorter_than_50_tau_says_so():
+    import emcee
+
+    x = _ar1_walkers(32, 300, 0.9, seed=11)
+    tau = emcee.autocorr.integrated_time(x, tol=0).max()
+    d = P.diagnose(_ensemble(x, unreliable=True, config={"n_steps": 400, "burn_in": 100}))
+    assert not d["reliable"] and d["tau"] == pytest.approx(tau, rel=1e-12)
+    (msg,) = d["messages"]
+    assert msg.startswith(f"chain of 300 steps is shorter than 50 × τ = {50 * tau:.0f} "
+                          f"(τ = {tau:.1f} steps"), msg
+    assert "n_steps=400 →" in msg
+
+
+def test_a_drifting_ensemble_is_too_short_for_its_tau():
+    x = _ar1_walkers(32, 1200, 0.9, seed=10)  # reliable as it is (the test above)
+    x = x + np.linspace(0.0, 1.0, 1200)[:, None, None]  # the whole ensemble moves 1 sd
+    d = P.diagnose(_ensemble(x, unreliable=True))
+    assert not d["reliable"] and d["tau"] > 24 and "shorter than 50 × τ" in d["messages"][0]
+
+
+def test_an_ensemble_with_a_walker_that_never_moved_has_no_tau():
+    x = _ar1_walkers(16, 2000, 0.5, seed=12)
+    x[:, 3] = x[0, 3]  # walker 3 stuck where it started
+    d = P.diagnose(_ensemble(x, unreliable=True))
+    assert np.isnan(d["tau"]) and not d["reliable"]
+    assert "cannot be estimated" in " ".join(d["messages"])
+    assert d["ess"] == pytest.approx(d["ess_chain"])  # ArviZ's, where τ has no value
+
+
+def test_ensemble_autocorr_time_is_emcees_with_its_own_tolerance():
+    import emcee
+
+    from mrfpe.posterior.diagnostics import ENSEMBLE_TAU_MULTIPLE, ensemble_autocorr_time
+
+    x = _ar1_walkers(8, 400, 0.9, seed=13)  # τ ≈ 19: 50 τ > 400 draws
+    tau, ok = ensemble_autocorr_time(x.transpose(1, 0, 2))
+    np.testing.assert_array_equal(tau, emcee.autocorr.integrated_time(x, tol=0))
+    with pytest.raises(emcee.autocorr.AutocorrError):
+        emcee.autocorr.integrated_time(x, tol=ENSEMBLE_TAU_MULTIPLE)
+    assert not ok
+    assert ensemble_autocorr_time(x.transpose(1, 0, 2), tol=0.9 * 400 / tau.max())[1]

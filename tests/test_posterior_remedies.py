@@ -1,4 +1,4 @@
-"""PosteriorWarning says what to change, per sampler family; ensembles get a nested R̂;
+"""PosteriorWarning says what to change, per sampler family; ensembles are judged by τ;
 distances say when a posterior is a set of optima."""
 
 from __future__ import annotations

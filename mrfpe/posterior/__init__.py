@@ -17,7 +17,8 @@ Attributes: ``sampler``, ``config`` (JSON), ``seed`` (−1 for None), ``target``
 (JSON), ``mrfpe_version``, ``n_target_evals``, ``wall_time_s``; ``kind``
 (``"draws"``, a sample of the posterior, or ``"optima"``, the optima of a
 multi-start optimiser); optional ``chain_type`` (``"ensemble"`` for interacting
-walkers, judged by a nested R̂; absent: independent chains); the diagnostics of
+walkers, judged by the ensemble's integrated autocorrelation time τ: reliable once
+the kept chain spans 50 τ; absent: independent chains); the diagnostics of
 :func:`diagnose` as ``diag_ess``,
 ``diag_ess_kish``, ``diag_ess_chain``, ``diag_pareto_k``, ``diag_rhat`` (floats, NaN
 where not applicable), ``diag_reliable`` (1 or 0) and ``diag_messages`` (the reasons,

@@ -1,6 +1,6 @@
 """Is a posterior's sample set good enough to trust? :func:`diagnose` and :class:`PosteriorWarning`.
 
-Three published diagnostics, each computed by a well-known library:
+Three published diagnostics, each computed by a well-known library (ensembles: below):
 
 ``ess`` — effective sample size.
     Weighted sets without chains: Kish's ``1 / Σ w̃²`` (:func:`mrfpe.resampling.ess`).
@@ -19,21 +19,20 @@ Three published diagnostics, each computed by a well-known library:
     dependent threshold; 0.7 from S ≈ 2150 on).
 ``rhat`` — ArviZ's rank-normalised split R̂ (Vehtari et al. 2021), the largest over the
     parameters, when there are at least two chains; NaN otherwise.
-    Unreliable when ``rhat > RHAT_MAX`` (1.01) or not finite.
-    *Ensembles* (``attrs["chain_type"] == "ensemble"``, emcee's walkers): the walkers
-    are many short, interacting chains. R̂ across walkers is inflated by about
-    ``τ / (2 n)`` for walkers of ``n`` draws and autocorrelation time ``τ`` even when
-    the ensemble is stationary — ``R̂ ≤ 1.01`` demands an ESS of ~100 *per walker*
-    (3200 for 32 walkers), while the estimates use all walkers together. Measured on
-    the 3-D Gaussian of ``benchmarks/bench_accuracy.py``: R̂ across walkers
-    1.08–1.12 with means within 0.08 sd and sds within 4 %. For ensembles the
-    ``rhat`` is therefore the *nested* R̂ of Margossian et al. (2024), made for
-    many short chains: the walkers are grouped into :data:`ENSEMBLE_SUPERCHAINS`
-    superchains and each walker's chain is split in halves (so drift between the
-    halves still shows), ``R̂_ν = √(1 + B_ν / W_ν)`` with ``B_ν`` the variance of
-    the superchain means and ``W_ν`` the mean within-superchain variance
-    (between walkers plus within walkers); same threshold. ArviZ has no nested R̂,
-    hence :func:`nested_rhat`. The ESS stays ArviZ's, pooled over the walkers.
+    Unreliable when ``rhat > RHAT_MAX`` (1.01) or not finite; ensembles are judged by τ.
+
+*Ensembles* (``attrs["chain_type"] == "ensemble"``: walkers that move using each other,
+as emcee's; a sampler opts in with ``KeptStates(..., ensemble=True)`` of
+:mod:`mrfpe.samplers.kit`) are judged as Goodman & Weare (2010) and emcee's
+documentation (Foreman-Mackey et al. 2013) judge them: by ``tau``, the ensemble's
+integrated autocorrelation time in kept steps, the largest over the parameters
+(:func:`ensemble_autocorr_time`). Short chains underestimate τ and emcee trusts it from
+a chain of about 50 τ on: an ensemble is unreliable when its kept steps per walker are
+fewer than :data:`ENSEMBLE_TAU_MULTIPLE` × τ, or τ cannot be estimated. Its ``ess`` is
+``n_walkers × n_kept / max(τ, 1)`` (:func:`ensemble_ess`); ``ess_chain`` (ArviZ's, over
+the walkers) and ``rhat`` (the split nested R̂ of Margossian et al. 2024,
+:func:`nested_rhat`) are for comparison only: R̂ across the walkers of one ensemble is
+inflated by about ``τ / (2n)`` (``n`` draws per walker) even when it is stationary.
 
 A posterior of ``kind="optima"`` (the optima of a multi-start optimiser) is not a
 posterior sample at all: :func:`diagnose` says so and marks it unreliable, and
@@ -47,7 +46,8 @@ an importance sampler of the target) is unreliable whatever its ESS, and says wh
 (floats, NaN where not applicable), ``diag_reliable`` (the integer 1 or 0: netCDF
 has no boolean attribute, and the posterior should write with plain
 ``Dataset.to_netcdf``) and ``diag_messages`` (the reasons, one per line; empty
-when reliable), see :data:`ATTRS`, and warns once with :class:`PosteriorWarning`
+when reliable), see :data:`ATTRS` (an ensemble's τ is in :func:`diagnose`'s result
+and in the reasons, not an attribute), and warns once with :class:`PosteriorWarning`
 when a posterior of kind ``"draws"`` is unreliable.
 """
 
@@ -56,7 +56,7 @@ from __future__ import annotations
 import json
 import math
 import warnings
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import xarray as xr
@@ -66,21 +66,10 @@ from mrfpe._caller import stacklevel_outside_mrfpe
 from mrfpe.resampling import check_log_weights, ess, normalise_log_weights
 
 __all__ = [
-    "ATTRS",
-    "CHAIN_TYPES",
-    "ENSEMBLE_SUPERCHAINS",
-    "ESS_MIN",
-    "KINDS",
-    "PARETO_K_MAX",
-    "RHAT_MAX",
-    "PosteriorWarning",
-    "chain_ess",
-    "chain_layout",
-    "diagnose",
-    "diagnostics_attrs",
-    "nested_rhat",
-    "pareto_k_threshold",
-    "stored_messages",
+    "ATTRS", "CHAIN_TYPES", "ENSEMBLE_SUPERCHAINS", "ENSEMBLE_TAU_MULTIPLE", "ESS_MIN", "KINDS",
+    "PARETO_K_MAX", "RHAT_MAX", "PosteriorWarning", "chain_ess", "chain_layout", "diagnose",
+    "diagnostics_attrs", "ensemble_autocorr_time", "ensemble_ess", "nested_rhat",
+    "pareto_k_threshold", "stored_messages",
 ]
 
 #: Smallest effective sample size a posterior's estimates are trusted at.
@@ -91,6 +80,8 @@ PARETO_K_MAX = 0.7
 RHAT_MAX = 1.01
 #: Superchains the walkers of an ensemble are grouped into for :func:`nested_rhat`.
 ENSEMBLE_SUPERCHAINS = 4
+#: How many τ an ensemble's kept chain must span: emcee's ``integrated_time(tol=50)``.
+ENSEMBLE_TAU_MULTIPLE = 50.0
 #: The values of the ``chain_type`` attribute (absent: independent chains).
 CHAIN_TYPES = ("independent", "ensemble")
 #: The values of the ``kind`` attribute.
@@ -183,23 +174,66 @@ def nested_rhat(x: np.ndarray, n_superchains: int = ENSEMBLE_SUPERCHAINS) -> flo
     return float(np.max(r))
 
 
-def _chain_stats(theta: np.ndarray, layout: np.ndarray,
-                 ensemble: bool = False) -> tuple[float, float]:
-    """(worst bulk/tail ESS over parameters, worst R̂ or NaN for one chain) from ArviZ
-    (for an ensemble the nested R̂ of :func:`nested_rhat`)."""
-    az = arviz()
+def ensemble_autocorr_time(x: np.ndarray,
+                           tol: float = ENSEMBLE_TAU_MULTIPLE) -> tuple[np.ndarray, bool]:
+    """An ensemble's integrated autocorrelation time per parameter, and whether its chain
+    is long enough to trust it.
 
-    x = theta[layout]  # (chain, draw, param)
+    ``emcee.autocorr.integrated_time`` (Foreman-Mackey et al. 2013) on the draws as
+    ``(draw, walker, param)``: each walker's normalised autocorrelation function,
+    averaged over the walkers and summed up to Sokal's automatic window (``c = 5``) —
+    as emcee's "Autocorrelation analysis" tutorial recommends, for the τ by which
+    Goodman & Weare (2010) measure an ensemble. The verdict is emcee's: with ``tol`` and
+    ``quiet=False`` it raises ``AutocorrError`` (carrying its estimate) when the chain is
+    shorter than ``tol × τ``. A τ not positive and finite fails too: τ is NaN for a
+    parameter in which a walker never moved (its autocorrelation is undefined).
+
+    Parameters
+    ----------
+    x : (C, K, d) array — ``C`` walkers of ``K`` draws each, in draw order.
+    tol : float — how many autocorrelation times the chain must be long (emcee's 50).
+
+    Returns
+    -------
+    (tau, long_enough) : τ per parameter in draws (NaN where not estimable), and whether
+        ``K >= tol × τ`` for every parameter, each τ positive and finite.
+    """
+    import emcee
+
+    with np.errstate(divide="ignore", invalid="ignore"):  # a constant walker: 0/0
+        try:
+            tau = emcee.autocorr.integrated_time(np.swapaxes(x, 0, 1), tol=tol, quiet=False)
+            short = False
+        except emcee.autocorr.AutocorrError as exc:
+            tau, short = exc.tau, True
+    tau = np.asarray(tau, dtype=np.float64)
+    tau[np.any(np.ptp(x, axis=1) == 0, axis=0)] = np.nan  # a walker that never moved
+    return tau, not short and bool(np.all(np.isfinite(tau) & (tau > 0)))
+
+
+def ensemble_ess(x: np.ndarray, tau: np.ndarray | None = None) -> float:
+    """An ensemble's ESS ``n_walkers × n_draws / max(τ, 1)`` (``x`` (walker, draw, param);
+    τ the largest :func:`ensemble_autocorr_time`, or of ``tau``, in kept draws; never more
+    than the draws), NaN unless τ is positive and finite. Short chains underestimate τ,
+    overstating the ESS: trust it from a chain of :data:`ENSEMBLE_TAU_MULTIPLE` τ on."""
+    t = float(np.max(ensemble_autocorr_time(x)[0] if tau is None else tau))
+    return x.shape[0] * x.shape[1] / max(t, 1.0) if math.isfinite(t) and t > 0 else math.nan
+
+
+def _rhat(x: np.ndarray, ensemble: bool) -> float:
+    """The worst R̂ of chains ``x`` (chain, draw, param): ArviZ's, NaN for one chain; for
+    an ensemble of at least 2·:data:`ENSEMBLE_SUPERCHAINS` walkers :func:`nested_rhat`."""
     if ensemble and x.shape[0] >= 2 * ENSEMBLE_SUPERCHAINS:
-        return chain_ess(x), nested_rhat(x)
-    rhat_max = -math.inf
-    if x.shape[0] >= 2:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            for j in range(x.shape[2]):
-                r = float(az.rhat(x[:, :, j]))
-                rhat_max = max(rhat_max, r if np.isfinite(r) else math.inf)
-    return chain_ess(x), (rhat_max if x.shape[0] >= 2 else math.nan)
+        return nested_rhat(x)
+    if x.shape[0] < 2:
+        return math.nan
+    az, rhat_max = arviz(), -math.inf
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for j in range(x.shape[2]):
+            r = float(az.rhat(x[:, :, j]))
+            rhat_max = max(rhat_max, r if np.isfinite(r) else math.inf)
+    return rhat_max
 
 
 def _pareto_k(log_w: np.ndarray, reff: float) -> float:
@@ -213,6 +247,31 @@ def _pareto_k(log_w: np.ndarray, reff: float) -> float:
         warnings.simplefilter("ignore")
         _, k = az.psislw(pos - np.max(pos), reff=min(max(reff, 1e-3), 1.0))
     return float(k)
+
+
+class _Chains(NamedTuple):  # what the chains say (:func:`_chains`)
+    n_chains: int = 0
+    n_draws: int = 0  # per chain
+    ess: float = math.nan  # the ESS of the draws, before Kish's efficiency
+    ess_chain: float = math.nan  # ArviZ's, pooled over the chains
+    rhat: float = math.nan
+    tau: float = math.nan  # ensembles: the largest τ, in draws
+    long_enough: bool = True  # ensembles: the chain is ENSEMBLE_TAU_MULTIPLE τ long
+
+
+def _chains(post: xr.Dataset, theta: np.ndarray, ensemble: bool) -> _Chains:
+    """ArviZ's ESS and R̂ of ``post``'s chains; an ensemble's τ and ESS C·K/τ too."""
+    if "chain" not in post:
+        return _Chains()
+    layout, chains = chain_layout(post)
+    x = theta[layout]  # (chain, draw, param)
+    ess_chain, rhat = chain_ess(x), _rhat(x, ensemble)
+    if not ensemble:
+        return _Chains(int(chains.size), x.shape[1], ess_chain, ess_chain, rhat)
+    taus, long_enough = ensemble_autocorr_time(x)
+    e = ensemble_ess(x, taus)
+    return _Chains(int(chains.size), x.shape[1], e if math.isfinite(e) else ess_chain,
+                   ess_chain, rhat, float(np.max(taus)), long_enough)
 
 
 class _Remedy:
@@ -260,6 +319,21 @@ class _Remedy:
                     + "), or an unweighted sampler (mh, emcee)")
         return self._more() + self._soften() + " or a wider proposal"
 
+    def tau(self, c: _Chains) -> str:
+        """Why an ensemble is too short for its τ; the chain that reaches 50 τ (estimated)."""
+        m, n, tau = ENSEMBLE_TAU_MULTIPLE, c.n_draws, c.tau
+        ok = math.isfinite(tau) and tau > 0
+        o = self._first("n_steps", "n_iterations",
+                        factor=max(2, math.ceil(m * tau / max(n, 1))) if ok else 2)
+        fix = f"a longer chain ({o} at least)" if o else "run a longer chain"
+        if not ok:
+            return (f"the ensemble's integrated autocorrelation time cannot be estimated "
+                    f"from its chain of {n} steps (a walker that never moved?); {fix}")
+        return (f"chain of {n} steps is shorter than {m:g} × τ = {m * tau:.0f} (τ = "
+                f"{tau:.1f} steps, the integrated autocorrelation time of the "
+                f"{c.n_chains}-walker ensemble; steps kept after burn-in): too short to "
+                f"trust τ or the ESS; {fix}")
+
     def rhat(self) -> str:
         opts = [self._first("n_steps", factor=4), self._first("burn_in", factor=4)]
         return "a longer chain with a longer burn-in (" + ", ".join(
@@ -294,8 +368,10 @@ def diagnose(post: Any) -> dict[str, Any]:
         the posterior has no ``chain``), ``ess`` (the ESS the verdict uses),
         ``ess_kish``, ``ess_chain`` (ArviZ bulk/tail ESS, NaN without chains),
         ``pareto_k`` (NaN for equal weights), ``pareto_k_threshold``, ``rhat``
-        (NaN for fewer than two chains), ``reliable`` (bool) and ``messages``
-        (list of str: why not, and what to change).
+        (NaN for fewer than two chains; an ensemble's nested R̂, reported only),
+        ``tau`` (an ensemble's integrated autocorrelation time in kept steps, the
+        largest over the parameters; NaN for other posteriors), ``reliable`` (bool)
+        and ``messages`` (list of str: why not, and what to change).
 
     Raises
     ------
@@ -319,15 +395,10 @@ def diagnose(post: Any) -> dict[str, Any]:
     theta = np.asarray(post["theta"].values, dtype=np.float64)
     S = theta.shape[0]
     ess_kish = ess(lw)
-    n_chains, ess_chain, rhat = 0, math.nan, math.nan
-    if "chain" in post:
-        layout, chains = chain_layout(post)
-        n_chains = int(chains.size)
-        ess_chain, rhat = _chain_stats(theta, layout, ensemble=chain_type == "ensemble")
-        ess_used = max(ess_chain * ess_kish / S, 1.0)
-    else:
-        ess_used = ess_kish
-    reff = ess_chain / S if n_chains else 1.0
+    ensemble = chain_type == "ensemble"
+    c = _chains(post, theta, ensemble)
+    ess_used = max(c.ess * ess_kish / S, 1.0) if c.n_chains else ess_kish
+    reff = c.ess_chain / S if c.n_chains else 1.0
     k = _pareto_k(lw, reff)
     k_max = pareto_k_threshold(S)
     messages: list[str] = []
@@ -335,7 +406,7 @@ def diagnose(post: Any) -> dict[str, Any]:
         messages.append("kind='optima': the sample set is the optima of a multi-start "
                         "optimiser, not draws from the posterior, so its weighted moments and "
                         "spread are not posterior estimates (use a sampler for those)")
-    fix = _Remedy(post, n_chains, chain_type, ess_used)
+    fix = _Remedy(post, c.n_chains, chain_type, ess_used)
     if post.attrs.get("bias"):  # the estimator itself is off, whatever the ESS says
         messages.append(f"known bias: {post.attrs['bias']}")
     if not ess_used >= ESS_MIN:
@@ -343,12 +414,13 @@ def diagnose(post: Any) -> dict[str, Any]:
     if not (math.isnan(k) or k <= k_max):
         messages.append(f"Pareto k̂ {k:.2f} > {k_max:.2f} (S = {S}): a few weights dominate; "
                         f"{fix.tail()}")
-    if n_chains >= 2 and not rhat <= RHAT_MAX:
-        what = "nested R̂ (walkers in superchains)" if chain_type == "ensemble" else "R̂"
-        messages.append(f"{what} {rhat:.3f} > {RHAT_MAX}: the chains disagree; {fix.rhat()}")
-    return {"kind": kind, "n_samples": int(S), "n_chains": n_chains, "ess": float(ess_used),
-            "ess_kish": float(ess_kish), "ess_chain": float(ess_chain), "pareto_k": float(k),
-            "pareto_k_threshold": float(k_max), "rhat": float(rhat),
+    if ensemble and c.n_chains and not c.long_enough:  # judged by τ, not by R̂
+        messages.append(fix.tau(c))
+    elif not ensemble and c.n_chains >= 2 and not c.rhat <= RHAT_MAX:
+        messages.append(f"R̂ {c.rhat:.3f} > {RHAT_MAX}: the chains disagree; {fix.rhat()}")
+    return {"kind": kind, "n_samples": int(S), "n_chains": c.n_chains, "ess": float(ess_used),
+            "ess_kish": float(ess_kish), "ess_chain": float(c.ess_chain), "pareto_k": float(k),
+            "pareto_k_threshold": float(k_max), "rhat": float(c.rhat), "tau": float(c.tau),
             "reliable": not messages, "messages": messages}
 
 

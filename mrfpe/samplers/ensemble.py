@@ -9,10 +9,17 @@ random state is seeded from the same ``SeedSequence`` as the start points, so
 one ``seed`` fixes every number. The target is −inf outside its bounds, so
 stretch moves that leave the box are rejected and every sample respects the
 bounds. The post-burn-in, thinned walker positions are the equal-weight
-sample set, marked ``attrs["chain_type"] = "ensemble"``: the walkers are not
-independent chains, so :func:`mrfpe.posterior.diagnose` judges them by the nested
-R̂ of walker superchains (its docstring says why). Default budget: 32 walkers ×
-625 steps = 20000 evaluations, the thesis's MCMC budget (7.4).
+sample set, kept as one ensemble (``KeptStates(..., ensemble=True)``, so
+``attrs["chain_type"] = "ensemble"``): the walkers move using each other and are
+not independent chains, so :func:`mrfpe.posterior.diagnose` judges them as Goodman
+& Weare (2010) and emcee's documentation (Foreman-Mackey et al. 2013) do, by the
+ensemble's integrated autocorrelation time τ (``autocorr_time(param)``, in kept
+steps): reliable only when the kept chain is at least 50 τ long, with an ESS of
+``n_walkers × n_kept / τ``. R̂ across the walkers is reported, not decisive. Default
+budget: 32 walkers × 625 steps = 20000 evaluations, the thesis's MCMC budget (7.4);
+the stretch move's τ grows with the dimension (about 35–40 steps in 3-D, 100–125 in
+10-D on Gaussians), so that budget is too short for 50 τ and reads unreliable: ask for
+``n_steps`` of 50 τ plus the burn-in.
 """
 
 from __future__ import annotations
@@ -21,6 +28,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from mrfpe.posterior.diagnostics import ensemble_autocorr_time
 from mrfpe.samplers.base import Callback, Sampler, check_positive_int, check_range
 from mrfpe.samplers.kit import (
     KeptStates,
@@ -42,7 +50,9 @@ class EmceeEnsemble(Sampler):
     n_walkers : int
         Walkers (even, at least 2·d + 2 is checked at run time; default 32).
     n_steps : int
-        Ensemble steps, burn-in included (625: 20000 evaluations with 32 walkers).
+        Ensemble steps, burn-in included (625: 20000 evaluations with 32 walkers). The
+        posterior reads reliable once the kept steps span 50 integrated autocorrelation
+        times τ (:func:`mrfpe.posterior.diagnose`; the warning names the ``n_steps``).
     burn_in : int
         Leading steps dropped from the sample set; must be < ``n_steps``.
     thin : int
@@ -85,7 +95,7 @@ class EmceeEnsemble(Sampler):
                                         moves=emcee.moves.StretchMove(a=self.stretch_scale))
         rstate = np.random.RandomState(np.random.MT19937(ss_emcee)).get_state()
         acceptance = np.zeros(n)
-        kept = KeptStates(n, self.burn_in, self.thin, w, d)
+        kept = KeptStates(n, self.burn_in, self.thin, w, d, ensemble=True)  # walkers interact
         prev = p0
         states = sampler.sample(emcee.State(p0, log_prob=lp0, random_state=rstate),
                                 iterations=n, store=False, skip_initial_state_check=True)
@@ -96,13 +106,8 @@ class EmceeEnsemble(Sampler):
             run.offer(x, lp)
             kept.record(t, x, lp)
             run.step(t, kept.trace_ess(t), acceptance=float(acceptance[t]))
-        try:
-            tau = emcee.autocorr.integrated_time(kept.theta, tol=0)  # tol=0: no length warning
-        except Exception:  # a chain too short to estimate it
-            tau = np.full(d, np.nan)
+        tau, _ = ensemble_autocorr_time(kept.theta.transpose(1, 0, 2))  # diagnose's τ
         theta, log_target, _ = kept.flat()
-        extra = {"acceptance": (("step",), acceptance),
-                 "autocorr_time": (("param",), np.asarray(tau, float))}
+        extra = {"acceptance": (("step",), acceptance), "autocorr_time": (("param",), tau)}
         return run.finish(theta, log_target, None, sampler=self.name, config=self.get_config(),
-                          seed=seed, chain=kept.chain(), extra_vars=extra,
-                          extra_attrs={"chain_type": "ensemble"})  # walkers interact
+                          seed=seed, extra_vars=extra, **kept.build_kwargs())

@@ -3,11 +3,16 @@
 :func:`start_chains` is the common opening of an MCMC sampler's ``run``:
 validate the target and the seed, open the run log, draw the chains' starting
 states in the support and prepare the record of the kept (post-burn-in,
-thinned) states, :class:`KeptStates`.
+thinned) states, :class:`KeptStates`. ``KeptStates(..., ensemble=True)`` marks the
+chains as the walkers of one ensemble (walkers that move using each other, as emcee's):
+its ``ess`` trace and the posterior's diagnostics then follow the ensemble's integrated
+autocorrelation time (Goodman & Weare 2010) instead of treating the walkers as
+independent chains (:func:`mrfpe.posterior.diagnose`).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import Any, NamedTuple
 
@@ -43,6 +48,24 @@ class KeptStates:
     ...     kept.record(t, x, lp)            # no-op on steps that are not kept
     >>> theta, log_target, log_weight = kept.flat()                 # doctest: +SKIP
 
+    Parameters
+    ----------
+    n_steps, burn_in, thin : int
+        The run's length, the leading steps dropped and the thinning of the rest.
+    n_chains, d : int
+        Chains (or walkers) and parameters.
+    weighted : bool
+        Keep a ``log_weight`` per state (dynamic weighting).
+    ensemble : bool
+        The chains are the walkers of one ensemble sampler (emcee's affine-invariant
+        ensemble, or any whose walkers move using each other), not independent chains.
+        :meth:`trace_ess` is then ``n_walkers × n_kept / τ`` with τ the ensemble's
+        integrated autocorrelation time (:func:`mrfpe.posterior.diagnostics.ensemble_ess`),
+        and :meth:`build_kwargs` marks the posterior ``chain_type="ensemble"``, which
+        :func:`mrfpe.posterior.diagnose` judges by τ (Goodman & Weare 2010; emcee's
+        documentation, Foreman-Mackey et al. 2013, asks for a chain of about 50 τ)
+        rather than by R̂ across the walkers.
+
     Attributes
     ----------
     steps : (K,) the kept step indices.
@@ -51,7 +74,8 @@ class KeptStates:
     """
 
     def __init__(self, n_steps: int, burn_in: int, thin: int, n_chains: int, d: int, *,
-                 weighted: bool = False):
+                 weighted: bool = False, ensemble: bool = False):
+        self.ensemble = bool(ensemble)
         self.steps = np.arange(burn_in, n_steps, thin)
         k = self.steps.size
         self.theta = np.empty((k, n_chains, d))
@@ -77,17 +101,20 @@ class KeptStates:
     def trace_ess(self, t: int) -> float:
         """The ``ess`` trace entry of step ``t``: at a checkpoint (:data:`ESS_CHECKPOINTS`
         evenly spaced kept steps), the autocorrelation-based ESS of the states kept so
-        far — :func:`mrfpe.posterior.diagnostics.chain_ess` pooled over the chains,
-        times Kish's efficiency of the kept weights when ``weighted`` (as
-        :func:`mrfpe.posterior.diagnose` does) —; NaN elsewhere and during burn-in.
-        Never the draw count. Call it after :meth:`record` of step ``t``."""
+        far — :func:`mrfpe.posterior.diagnostics.chain_ess` pooled over the chains (for
+        an ``ensemble``, :func:`~mrfpe.posterior.diagnostics.ensemble_ess`, ``n_walkers ×
+        n_kept / τ``, where τ can be estimated), times Kish's efficiency of the kept
+        weights when ``weighted`` (as :func:`mrfpe.posterior.diagnose` does) —; NaN
+        elsewhere and during burn-in. Never the draw count. Call it after
+        :meth:`record` of step ``t``."""
         if t not in self.checkpoints or self._k < 4:
             return float("nan")
-        from mrfpe.posterior.diagnostics import chain_ess
+        from mrfpe.posterior.diagnostics import chain_ess, ensemble_ess
         from mrfpe.resampling import ess
 
         x = self.theta[: self._k].transpose(1, 0, 2)  # (chain, draw, param)
-        e = chain_ess(x)
+        e = ensemble_ess(x) if self.ensemble else math.nan
+        e = e if math.isfinite(e) else chain_ess(x)
         if self.log_weight is not None:
             lw = self.log_weight[: self._k].reshape(-1)
             e = max(e * ess(lw) / lw.size, 1.0)
@@ -102,6 +129,19 @@ class KeptStates:
     def chain(self) -> np.ndarray:
         """(S,) chain index of each flattened sample (for per-chain diagnostics)."""
         return np.tile(np.arange(self.theta.shape[1]), self.steps.size)
+
+    def build_kwargs(self, extra_attrs: dict[str, Any] | None = None) -> dict[str, Any]:
+        """The keyword arguments :meth:`Run.finish` (:func:`mrfpe.posterior.build`) needs
+        for these chains: ``chain`` (:meth:`chain`) and, for an ``ensemble``,
+        ``extra_attrs`` with ``chain_type="ensemble"`` (merged into ``extra_attrs``).
+
+        >>> run.finish(theta, lp, None, sampler=..., config=..., seed=seed,
+        ...            **kept.build_kwargs())                          # doctest: +SKIP
+        """
+        attrs = dict(extra_attrs or {})
+        if self.ensemble:
+            attrs["chain_type"] = "ensemble"
+        return {"chain": self.chain(), **({"extra_attrs": attrs} if attrs else {})}
 
 
 class ChainStart(NamedTuple):
@@ -118,14 +158,15 @@ class ChainStart(NamedTuple):
 def start_chains(target: Any, seed: int | None, *, n_steps: int, n_chains: int, burn_in: int,
                  thin: int, desc: str, progress: bool = False,
                  callback: Callable[[int, dict], Any] | None = None,
-                 weighted: bool = False) -> ChainStart:
+                 weighted: bool = False, ensemble: bool = False) -> ChainStart:
     """Open an MCMC run of ``n_chains`` chains of ``n_steps`` steps on ``target``.
 
     Validates the target (:func:`check_target`) and ``seed``, seeds the random
     stream, opens the :class:`Run` (its memory check counts the kept states and the
     burn-in), draws the starting states uniformly in the support
     (:func:`draw_in_support`, counted) and prepares :class:`KeptStates` (with
-    weights when ``weighted``). ``desc`` names the progress bar.
+    weights when ``weighted``; of one ensemble's walkers when ``ensemble``). ``desc``
+    names the progress bar.
     """
     bounds = check_target(target)
     check_seed(seed)
@@ -133,5 +174,6 @@ def start_chains(target: Any, seed: int | None, *, n_steps: int, n_chains: int, 
     run = Run(target, n_steps, progress=progress, callback=callback, desc=desc,
               rows=n_steps + n_chains * (n_steps // thin + burn_in + 4))
     x, lp = draw_in_support(run, target, rng, n_chains, bounds)
-    kept = KeptStates(n_steps, burn_in, thin, n_chains, bounds.shape[0], weighted=weighted)
+    kept = KeptStates(n_steps, burn_in, thin, n_chains, bounds.shape[0], weighted=weighted,
+                      ensemble=ensemble)
     return ChainStart(bounds, rng, run, x, lp, kept)

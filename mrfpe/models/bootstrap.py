@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from mrfpe.models.draws import simulate_draws
-from mrfpe.targets.maximise import maximise
+from mrfpe.targets.maximise import grid_size, maximise
 from mrfpe.validation import check_positive_int
 
 __all__ = ["parametric_bootstrap"]
@@ -46,7 +46,7 @@ def parametric_bootstrap(model: Any, data: Any, *, n_boot: int = 200, estimator:
                          f"the labels of a fixed scene, not scenes: bootstrap its label-field "
                          f"estimators elsewhere, or use 'pl_adjusted' or the exchange sampler "
                          f"for a calibrated posterior")
-    grid = max(3, int(4096 ** (1 / target.ndim)))
+    grid = max(3, grid_size(4096, target.ndim))  # at most 4096 points
     theta_hat, value = maximise(target, grid=grid, seed=int(rng.integers(2**31)))
     lik = model.target("likelihood", data, **{k: v for k, v in options.items()
                                                if k in ("covariates", "bounds")})
@@ -56,16 +56,17 @@ def parametric_bootstrap(model: Any, data: Any, *, n_boot: int = 200, estimator:
 
     lattice = isinstance(getattr(model, "graph_spec", None), LatticeSpec)
     shape = tuple(np.shape(data)[-2:]) if lattice else (lik.x.shape[1],)
-    fits, values = [], []
+    fits, values, boxes = [], [], []
     for k in range(n_boot):
         yk = draws.y[k * lik.n_observations:(k + 1) * lik.n_observations]
         tk = model.target(estimator, yk.reshape(-1, *shape), **options)
         t, v = maximise(tk, grid=grid, seed=int(rng.integers(2**31)))
         fits.append(t)
         values.append(v)
-    fits, b = np.array(fits), np.asarray(target.bounds, dtype=np.float64)
-    tol = 1e-6 * (b[:, 1] - b[:, 0])
-    on_face, bias = (fits - b[:, 0] <= tol) | (b[:, 1] - fits <= tol), None
+        boxes.append(np.asarray(tk.bounds, dtype=np.float64))
+    fits, b = np.array(fits), np.array(boxes)  # (n_boot, d), (n_boot, d, 2)
+    tol = 1e-6 * (b[:, :, 1] - b[:, :, 0])
+    on_face, bias = (fits - b[:, :, 0] <= tol) | (b[:, :, 1] - fits <= tol), None
     if on_face.any():  # degenerate simulated data (e.g. uniform lattices): the bound is no fit
         faces = [target.param_names[j] for j in np.flatnonzero(on_face.any(axis=0))]
         bias = (f"{int(on_face.any(axis=1).sum())} of {n_boot} refits lie on the box's face "

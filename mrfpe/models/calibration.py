@@ -58,9 +58,9 @@ from mrfpe.models.affine_maps import mode_map, moment_map, transport_map
 from mrfpe.models.draws import (
     Draws,
     _log_f_of,
-    _scores,
     _step,
     fisher_information,
+    posterior_mean_shift,
     simulate_draws,
 )
 from mrfpe.models.pl_spread import (
@@ -71,7 +71,7 @@ from mrfpe.models.pl_spread import (
     start_covariance,
 )
 from mrfpe.targets.base import Target, as_theta_batch
-from mrfpe.targets.maximise import maximise
+from mrfpe.targets.maximise import grid_size, maximise
 
 __all__ = ["AdjustedPL", "Draws", "fisher_information", "hessian", "mcmc_mle",
            "simulate_draws", "transport_map"]
@@ -183,8 +183,11 @@ class AdjustedPL(Target):
         ``"mode"`` (Bouranis et al. 2017): the adjusted target's mode is the MLE and
         its Hessian there the Fisher information. ``"moments"`` (default): its mean
         is the likelihood's posterior mean to third order -- the MLE plus the skew
-        term ``δ = ½ Σ ℓ₃ Σ`` (Tierney & Kadane 1986) from the simulations' third
-        cumulants -- and its covariance the inverse Fisher information: the PL
+        term ``δ = ½ Σ ℓ₃ Σ`` (Tierney & Kadane 1986), ``ℓ₃`` the log-likelihood's third
+        derivatives from the simulations (:func:`~mrfpe.models.draws.posterior_mean_shift`:
+        their cumulants and the expected derivatives of ``log f``, not the score's third
+        cumulant alone, which holds only for models log-linear in ``θ``) -- and its
+        covariance the inverse Fisher information: the PL
         posterior's mean and covariance (adaptive importance sampling of exp(PL),
         thousands of cheap PL evaluations) are mapped onto them. Where the
         posterior is skewed (near a critical coupling) the mode alignment carries
@@ -248,8 +251,8 @@ class AdjustedPL(Target):
         self.mle = None
         given = None if pl_sample is None else sample_moments(pl, pl_sample)  # before the work
         b = self.bounds
-        # a grid of at most ~4096 points whatever the dimension, then the local polish
-        theta_pl, lp_pl = maximise(pl, grid=max(3, int(4096 ** (1 / b.shape[0]))), seed=seed)
+        # a grid of at most 4096 points whatever the dimension, then the local polish
+        theta_pl, lp_pl = maximise(pl, grid=max(3, grid_size(4096, b.shape[0])), seed=seed)
         self._check_interior(theta_pl, np.zeros(b.shape[0]))
         H = self._curvature(theta_pl)
         rng = np.random.default_rng(seed)
@@ -282,8 +285,8 @@ class AdjustedPL(Target):
         centre, W = ((theta_pl, mode_map(H, info, affine)) if align == "mode"
                      else (mom.mean, moment_map(pl_cov, info, affine)))
         if align == "moments" and self.mle is not None:
-            # mean = MLE + the likelihood's skew (Laplace expansion)
-            theta_ml = theta_ml + _skew_shift(lik, self.mle.draws, info)
+            # mean = MLE + the likelihood's skew (third-order Laplace expansion)
+            theta_ml = theta_ml + posterior_mean_shift(lik, self.mle.draws, theta_ml, info)
         self._set_map(centre, W, theta_ml, theta_pl)
         self.fisher_information, self.pl_hessian, self.pl_covariance = info, H, pl_cov
         self.n_simulation_sweeps = int(sims)
@@ -391,21 +394,6 @@ def _pl_moments(pl: Any, theta_pl: np.ndarray, H: np.ndarray, bounds: np.ndarray
                              f"align='mode' calibrates the curvature at the MPLE only, and "
                              f"PMC on exp(PL) shows its shape") from None
         return None
-
-
-def _skew_shift(lik: Any, draws: Draws, info: np.ndarray) -> np.ndarray:
-    """Posterior mean minus mode of the likelihood under a flat prior, to third order.
-
-    ``δ_i = ½ Σ_ij ℓ_jkl Σ_kl`` with ``Σ = I⁻¹`` and ``ℓ_jkl = -M κ_jkl``, ``κ`` the
-    third cumulant of the score under ``p(y | θ)`` (for a log-linear model, of the
-    sufficient statistics), estimated from the draws (Tierney & Kadane 1986).
-    """
-    s = _scores(lik, draws, _step(lik, draws.theta))
-    c = s - s.mean(axis=0)
-    kappa = np.einsum("nj,nk,nl->jkl", c, c, c) / c.shape[0]
-    M = int(getattr(lik, "n_observations", 1))
-    sigma = np.linalg.inv(info)
-    return -0.5 * M * sigma @ np.einsum("jkl,kl->j", kappa, sigma)
 
 
 def _cholesky_or_none(H: np.ndarray) -> np.ndarray | None:

@@ -4,7 +4,8 @@
 simulator, or a chain whose burn-in and thinning follow its measured
 autocorrelation time); :func:`fisher_information` is ``M Cov[∇ log f(y | θ)]``
 over the draws, the statistic :mod:`mrfpe.models.calibration` and
-:mod:`mrfpe.models.bootstrap` build on.
+:mod:`mrfpe.models.bootstrap` build on; :func:`posterior_mean_shift` the third-order
+difference between the likelihood posterior's mean and the MLE.
 """
 
 from __future__ import annotations
@@ -14,11 +15,13 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from scipy.special import logsumexp
 
 from mrfpe.models.mixing import autocorrelation_time
+from mrfpe.models.pl_spread import hessian
 from mrfpe.targets.base import as_theta_batch
 
-__all__ = ["Draws", "fisher_information", "simulate_draws"]
+__all__ = ["Draws", "fisher_information", "posterior_mean_shift", "simulate_draws"]
 
 
 @dataclass(frozen=True)
@@ -134,3 +137,86 @@ def fisher_information(lik: Any, draws: Draws) -> np.ndarray:
                          f"(condition number {w[-1] / max(w[0], 1e-300):.3g}): some combination "
                          f"of {names} is not identified by the data")
     return info
+
+
+def log_likelihood_near(lik: Any, draws: Draws) -> Any:
+    """``θ (N, d) -> ℓ(θ) - ℓ(θ0)`` (N,) by importance sampling from the draws at ``θ0``.
+
+    Geyer & Thompson (1992): ``ℓ(θ) - ℓ(θ0) = log f(x | θ) - log f(x | θ0) - M log
+    mean_k exp(log f(y_k | θ) - log f(y_k | θ0))``, a smooth function of ``θ`` for fixed
+    draws whose derivatives at ``θ0`` are the draws' estimates of the likelihood's
+    (those of ``log Z`` are the cumulants of ``log f(y | θ)``'s derivatives).
+    """
+    log_f = _log_f_of(lik, draws)
+    lf0 = log_f(draws.theta[None])[0]
+    lx0 = float(lik.log_prob(draws.theta[None])[0])
+    M, K = int(getattr(lik, "n_observations", 1)), lf0.size
+
+    def ell(theta: np.ndarray) -> np.ndarray:
+        theta = as_theta_batch(theta, lik.ndim)
+        lw = log_f(theta) - lf0
+        return lik.log_prob(theta) - lx0 - M * (logsumexp(lw, axis=1) - math.log(K))
+    return ell
+
+
+def posterior_mean_shift(lik: Any, draws: Draws, theta_ml: Any, info: np.ndarray,
+                         step: float = 0.1) -> np.ndarray:
+    """The likelihood posterior's mean minus the MLE under a flat prior, to third order.
+
+    ``δ = ½ Σ ∇ tr(Σ ∇²ℓ)`` at the MLE, i.e. ``δ_i = ½ Σ_ij ℓ_jkl Σ_kl`` with ``Σ =
+    (-∇²ℓ)⁻¹`` the inverse observed information (Tierney & Kadane 1986; Tierney, Kass &
+    Kadane 1989). With ``ℓ = Σ_m log f(x_m | θ) - M log Z(θ)`` the third derivatives of
+    ``log Z`` are, with ``g = log f(y | θ)``, ``y ~ p(· | θ)`` (McCullagh 1987, ch. 7),
+
+        ``∂_jkl log Z = E[g_jkl] + Cov(g_jk, g_l) + Cov(g_jl, g_k) + Cov(g_kl, g_j)
+        + κ(g_j, g_k, g_l)``;
+
+    only for a model log-linear in ``θ`` (``g_jk`` constant) does this reduce to the
+    score's third cumulant, ``ℓ_jkl = -M κ_jkl``. Here every term comes at once from
+    finite differences of the Geyer-Thompson log-likelihood (:func:`log_likelihood_near`),
+    whose derivatives are exactly the draws' estimates of them, in coordinates whitened
+    by ``info`` (one unit = one asymptotic sd) with steps of ``step`` units: local
+    derivatives, as the expansion needs (0.5 sd averaged the third derivative over the
+    stencil and moved the shift by up to 1.4 sd near the Ising model's critical coupling,
+    where 0.1 reproduces the score-cumulant shortcut that is exact for that model).
+
+    ``theta_ml`` is the MLE, ``draws`` are at a point near it. Returns zeros where the
+    stencil leaves the likelihood's support even at an eighth of ``step``.
+    """
+    ell = log_likelihood_near(lik, draws)
+    th = as_theta_batch(theta_ml, lik.ndim)[0]
+    d = th.size
+    L0 = np.linalg.cholesky(np.linalg.inv(info))
+    s = float(step)
+    for _ in range(3):  # a smaller stencil where the MLE is near the support's edge
+        shift = _shift_whitened(lambda z: ell(th + z @ L0.T), d, s)
+        if shift is not None:
+            return L0 @ shift
+        s /= 2.0
+    return np.zeros(d)
+
+
+def _shift_whitened(phi: Any, d: int, s: float) -> np.ndarray | None:
+    """``½ Σz ∇ tr(Σz ∇²φ)`` at ``z = 0``, ``Σz = (-∇²φ(0))⁻¹``, by central differences of
+    step ``s``; None where a stencil point is ``-inf`` or ``Σz`` is not positive definite."""
+    with np.errstate(invalid="ignore"):
+        Hz = hessian(phi, np.zeros(d), np.full(d, s))
+    if not np.all(np.isfinite(Hz)):
+        return None
+    mu, U = np.linalg.eigh(-Hz)
+    if mu[0] <= 0:
+        return None
+    Sz = (U / mu) @ U.T
+    lam, V = np.linalg.eigh(Sz)  # tr(Sz ∇²φ) = Σ_e λ_e ∂²φ along v_e
+    pts = []
+    for j in range(d):
+        for sign in (1.0, -1.0):
+            c = sign * s * np.eye(d)[j]
+            pts += [c] + [c + s * V[:, e] for e in range(d)] + [c - s * V[:, e] for e in range(d)]
+    v = np.asarray(phi(np.array(pts)), dtype=np.float64).reshape(d, 2, 1 + 2 * d)
+    if not np.all(np.isfinite(v)):
+        return None
+    second = (v[:, :, 1:1 + d] + v[:, :, 1 + d:] - 2.0 * v[:, :, :1]) / s**2  # (d, 2, e)
+    trace = second @ lam  # (d, 2): tr at +s e_j and -s e_j
+    grad = (trace[:, 0] - trace[:, 1]) / (2.0 * s)
+    return 0.5 * Sz @ grad

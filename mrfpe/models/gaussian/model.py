@@ -251,6 +251,8 @@ class GaussianMRF(Model):
         common = {"model": self, "structure": st, "x": x, "Z": Z, "estimator": estimator}
         if estimator == "coding":
             nodes, n_codings = coding_nodes(st.graph, options["coding"])
+            _check_coding(st, x, self.covariate_matrix(options["covariates"], st.graph.shape),
+                          nodes, options["coding"], self.param_names())
         if estimator == "block":
             blocks = make_blocks(st.graph, options["block"])
         if st.needs_factorisation():
@@ -353,6 +355,43 @@ class GaussianMRF(Model):
                 f"directional={self.directional}, covariates={self.covariate_names})")
 
 
+def _check_coding(st: CARStructure, x: np.ndarray, Z: np.ndarray, nodes: np.ndarray, k: int,
+                  names: Sequence[str]) -> None:
+    """Refuse a coding whose nodes cannot identify the parameters (naming it and why).
+
+    A coding's likelihood is a regression of ``x_i`` on ``[1, (W_t (x - xbar))_i, z_i]``
+    over its nodes (Besag 1974, Sec. 6.1), with the precision the inverse residual
+    variance: it identifies ``theta`` only if those columns have full rank and leave a
+    residual degree of freedom. Otherwise its maximum runs to the box's edge (a perfect
+    fit: an infinite precision), e.g. for one node alone in its colour, or a class whose
+    nodes have no neighbours (no information on the coupling).
+    """
+    M = x.shape[0]
+    u = x - x.mean()
+    cols = [np.ones((M, nodes.size))] + [(W @ u.T).T[:, nodes] for W in st.W] + [
+        np.broadcast_to(Z[nodes, j], (M, nodes.size)) for j in range(Z.shape[1])]
+    D = np.stack([c.reshape(-1) for c in cols], axis=1)
+    p = D.shape[1]
+    rank = np.linalg.matrix_rank(D) if D.shape[0] else 0
+    if rank == p and D.shape[0] > p:
+        return
+    where = f"coding {k} ({nodes.size} node{'s' if nodes.size != 1 else ''}: " \
+            f"{nodes[:8].tolist()}{' ...' if nodes.size > 8 else ''})"
+    if D.shape[0] <= p:
+        why = (f"{D.shape[0]} observation(s) for {p} regression coefficients and the "
+               f"precision: no residual is left to estimate the precision")
+    else:
+        lonely = [names[1 + t] for t, W in enumerate(st.W) if not W[nodes].nnz]
+        still = [names[1 + t] for t in range(st.T) if np.ptp(D[:, 1 + t]) == 0]
+        why = (f"its nodes have no neighbours, so it carries no information on "
+               f"{', '.join(lonely)}" if lonely else
+               f"its nodes' neighbour sums are all alike (one shared neighbour, say), so "
+               f"{', '.join(still)} and the mean cannot be told apart" if still else
+               "its regressors (1, neighbour sums, covariates) are collinear")
+    raise ValueError(f"{where} does not identify the parameters: {why}; use 'pl', 'block' or "
+                     f"another coding")
+
+
 def autonormal(graph: Any = 4, *, directional: bool = False,
                covariates: int | Sequence[str] = 0, periodic: bool = False,
                bounds: Any = None) -> GaussianMRF:
@@ -373,7 +412,13 @@ def autonormal(graph: Any = 4, *, directional: bool = False,
     periodic : bool
         Torus boundary (lattices only).
     bounds : (d, 2) array or mapping name -> (low, high), optional
-        Overrides of the default bounds.
+        Overrides of the default bounds. These follow the data
+        (:mod:`mrfpe.models.gaussian.bounds`): the couplings' is the positive-definite
+        interval, the precision's ``(0, tau_PL max(2, 1 + 10 sqrt(2 / n_min)))`` with
+        ``tau_PL`` the pseudolikelihood's maximum over the precision and ``n_min`` the
+        fewest terms of any estimator (the smallest coding): ten of the PL's
+        curvature sds beyond its maximum, so fields scaled by ``c`` get a box scaled
+        by ``1 / c^2``.
     """
     return GaussianMRF(graph, directional=directional, periodic=periodic,
                        covariates=covariates, bounds=bounds)

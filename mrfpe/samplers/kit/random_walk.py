@@ -84,16 +84,24 @@ class AdaptiveRandomWalk:
         Steps during which the proposal adapts (if ``adapt``).
     adapt : bool
     target_acceptance : float
+    spread : (d, d) lower Cholesky factor, optional
+        The first proposal's shape (e.g. of a pseudolikelihood's inverse curvature),
+        scaled by ``2.38 / sqrt(d)`` (the optimal Gaussian scale, Roberts, Gelman &
+        Gilks 1997) instead of ``proposal_sd`` of each range.
     """
 
     def __init__(self, bounds: np.ndarray, n_chains: int, proposal_sd: float, burn_in: int,
-                 adapt: bool = True, target_acceptance: float = 0.234) -> None:
+                 adapt: bool = True, target_acceptance: float = 0.234,
+                 spread: np.ndarray | None = None) -> None:
         self.bounds = bounds
         self.lo, self.hi = bounds[:, 0], bounds[:, 1]
         self.d = bounds.shape[0]
         self.burn_in, self.adapt, self.target_acceptance = burn_in, adapt, target_acceptance
         self.chol = np.diag(proposal_sd * (self.hi - self.lo))
         self.log_scale, self._shaped = 0.0, False
+        if spread is not None:
+            self.chol = np.asarray(spread, dtype=np.float64)
+            self.log_scale, self._shaped = float(np.log(2.38 / np.sqrt(self.d))), True
         self._burn = np.empty((burn_in, n_chains, self.d)) if adapt else None
 
     @staticmethod

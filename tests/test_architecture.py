@@ -37,7 +37,7 @@ LAYERS = (
     ("models", ("models",)),
     ("targets", ("targets",)),
     ("posteriors", ("posterior", "mixture", "_arviz")),
-    ("registries, files and fast math", ("_plugins", "netcdf", "fastmath")),
+    ("registries, files and fast math", ("_plugins", "_factories", "netcdf", "fastmath")),
     ("leaves", ("validation", "resampling", "threads", "budget", "checksum", "_caller",
                 "_terminal", "_version", "_moved")),
 )

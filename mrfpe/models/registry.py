@@ -18,33 +18,19 @@ from __future__ import annotations
 import inspect
 from typing import Any
 
-from mrfpe._plugins import Registry, short_repr
+from mrfpe._factories import check_builds, check_factory, not_an_instance
+from mrfpe._plugins import Registry
 from mrfpe.models.base import Model
 
 __all__ = ["check_model_factory", "get", "names", "registry", "validate_model"]
 
 
+_BASE = "mrfpe.models.Model"
+
+
 def validate_model(obj: Any) -> None:
     """Raise ``TypeError`` unless ``obj`` is a Model class or a factory callable with defaults."""
-    if not callable(obj):
-        raise TypeError(f"a model must be a Model class or a factory function; got "
-                        f"{type(obj).__name__} {obj!r}")
-    if inspect.isclass(obj) and not issubclass(obj, Model):
-        raise TypeError(f"{obj.__name__} is a class but not an mrfpe.models.Model subclass")
-    try:
-        sig = inspect.signature(obj)
-    except (TypeError, ValueError):  # pragma: no cover - builtins without signatures
-        return
-    required = [p.name for p in sig.parameters.values()
-                if p.default is p.empty and p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD)]
-    if required:
-        raise TypeError(f"{getattr(obj, '__name__', obj)}() must be callable with no "
-                        f"arguments; parameters without defaults: {', '.join(required)}")
-
-
-def _not_a_model(what: str, model: Any) -> TypeError:
-    return TypeError(f"{what} returned {type(model).__name__} {short_repr(model)}, not an "
-                     f"mrfpe.models.Model")
+    check_factory(obj, Model, "model", _BASE)
 
 
 def check_model_factory(obj: Any) -> None:
@@ -53,13 +39,7 @@ def check_model_factory(obj: Any) -> None:
     Run on discovery of a model entry point, after :func:`validate_model`; the
     error says what the call raised or returned.
     """
-    what = f"{getattr(obj, '__name__', 'the factory')}()"
-    try:
-        model = obj()
-    except Exception as exc:
-        raise TypeError(f"{what} raised {type(exc).__name__}: {exc}") from None
-    if not isinstance(model, Model):
-        raise _not_a_model(what, model)
+    check_builds(obj, Model, _BASE)
 
 
 registry = Registry("mrfpe.models", "model", validate_model, check_model_factory)
@@ -99,5 +79,5 @@ def get(name: str, /, **kwargs: Any) -> Model:
     with registry.calling(info):
         model = factory(**kwargs)
     if not isinstance(model, Model):
-        raise _not_a_model(registry.label(info), model)
+        raise not_an_instance(registry.label(info), model, _BASE)
     return model

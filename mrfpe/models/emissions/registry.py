@@ -12,41 +12,24 @@ from __future__ import annotations
 import inspect
 from typing import Any
 
-from mrfpe._plugins import Registry, short_repr
+from mrfpe._factories import check_builds, check_factory, not_an_instance
+from mrfpe._plugins import Registry
 from mrfpe.models.emissions.base import Emission
 
 __all__ = ["check_emission_factory", "get", "names", "registry", "validate_emission"]
 
 
+_BASE = "mrfpe.models.emissions.Emission"
+
+
 def validate_emission(obj: Any) -> None:
     """``TypeError`` unless ``obj`` is an Emission class or a factory callable with defaults."""
-    if not callable(obj):
-        raise TypeError(f"an emission must be an Emission class or a factory function; got "
-                        f"{type(obj).__name__} {short_repr(obj)}")
-    if inspect.isclass(obj) and not issubclass(obj, Emission):
-        raise TypeError(f"{obj.__name__} is a class but not an mrfpe.models.emissions.Emission "
-                        f"subclass")
-    try:
-        sig = inspect.signature(obj)
-    except (TypeError, ValueError):  # pragma: no cover - builtins without signatures
-        return
-    required = [p.name for p in sig.parameters.values()
-                if p.default is p.empty and p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD)]
-    if required:
-        raise TypeError(f"{getattr(obj, '__name__', obj)}() must be callable with no "
-                        f"arguments; parameters without defaults: {', '.join(required)}")
+    check_factory(obj, Emission, "emission", _BASE)
 
 
 def check_emission_factory(obj: Any) -> None:
     """``TypeError`` unless calling ``obj`` with no arguments returns an Emission."""
-    what = f"{getattr(obj, '__name__', 'the factory')}()"
-    try:
-        built = obj()
-    except Exception as exc:
-        raise TypeError(f"{what} raised {type(exc).__name__}: {exc}") from None
-    if not isinstance(built, Emission):
-        raise TypeError(f"{what} returned {type(built).__name__} {short_repr(built)}, not an "
-                        f"mrfpe.models.emissions.Emission")
+    check_builds(obj, Emission, _BASE)
 
 
 registry = Registry("mrfpe.emissions", "emission", validate_emission, check_emission_factory)
@@ -79,6 +62,5 @@ def get(name: str, /, **kwargs: Any) -> Emission:
     with registry.calling(info):
         built = factory(**kwargs)
     if not isinstance(built, Emission):
-        raise TypeError(f"{registry.label(info)} returned {type(built).__name__}, not an "
-                        f"mrfpe.models.emissions.Emission")
+        raise not_an_instance(registry.label(info), built, _BASE)
     return built

@@ -46,10 +46,8 @@ from mrfpe.samplers.kit import (
     Run,
     check_chain_length,
     check_seed,
-    evaluate_inside,
-    metropolis_accept,
-    start_chains,
 )
+from mrfpe.samplers.mh import run_random_walk
 
 __all__ = ["LABEL_MCSE_MAX", "HiddenSampler"]
 
@@ -207,24 +205,4 @@ class HiddenSampler(Sampler):
     def _run_plain(self, target: Any, seed: int | None, progress: bool,
                    callback: Callback | None):
         """Random-walk Metropolis on a target without hidden labels (the parameters alone)."""
-        n, c = self.n_steps, self.n_chains
-        bounds, rng, run, x, lp, kept = start_chains(
-            target, seed, n_steps=n, n_chains=c, burn_in=self.burn_in, thin=self.thin,
-            desc=self.name, progress=progress, callback=callback)
-        walk = AdaptiveRandomWalk(bounds, c, self.proposal_sd, self.burn_in, self.adapt,
-                                  self.target_acceptance)
-        acceptance = np.zeros(n)
-        for t in range(n):
-            y, inside = walk.propose(x, rng)
-            lpy = evaluate_inside(run, target, y, inside)
-            accept = inside & metropolis_accept(np.log(rng.random(c)), lp, lpy)
-            x[accept], lp[accept] = y[accept], lpy[accept]
-            acceptance[t] = accept.mean()
-            run.offer(x, lp)
-            walk.update(t, x, acceptance[t])
-            kept.record(t, x, lp)
-            run.step(t, kept.trace_ess(t), acceptance=float(acceptance[t]))
-        theta, log_target, _ = kept.flat()
-        return run.finish(theta, log_target, None, sampler=self.name, config=self.get_config(),
-                          seed=seed, chain=kept.chain(),
-                          extra_vars={"acceptance": (("step",), acceptance)})
+        return run_random_walk(self, target, seed, progress, callback)

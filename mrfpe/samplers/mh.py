@@ -33,7 +33,7 @@ from mrfpe.samplers.kit import (
     start_chains,
 )
 
-__all__ = ["MetropolisHastings", "metropolis_accept"]  # the accept rule lives in the kit
+__all__ = ["MetropolisHastings", "metropolis_accept", "run_random_walk"]  # accept rule: the kit
 
 
 class MetropolisHastings(Sampler):
@@ -73,27 +73,36 @@ class MetropolisHastings(Sampler):
     def run(self, target: Any, *, seed: int | None, progress: bool = False,
             callback: Callback | None = None):
         """Run the chains on ``target`` and return the posterior Dataset."""
-        n, c = self.n_steps, self.n_chains
-        bounds, rng, run, x, lp, kept = start_chains(
-            target, seed, n_steps=n, n_chains=c, burn_in=self.burn_in, thin=self.thin,
-            desc=self.name, progress=progress, callback=callback)
-        walk = AdaptiveRandomWalk(bounds, c, self.proposal_sd, self.burn_in, self.adapt,
-                                  self.target_acceptance)
-        acceptance, scales = np.zeros(n), np.zeros(n)
-        for t in range(n):
-            scale = walk.scale
-            y, inside = walk.propose(x, rng)
-            lpy = evaluate_inside(run, target, y, inside)  # -inf outside, not evaluated
-            accept = inside & metropolis_accept(np.log(rng.random(c)), lp, lpy)
-            x[accept], lp[accept] = y[accept], lpy[accept]
-            acceptance[t], scales[t] = accept.mean(), scale
-            run.offer(x, lp)
-            walk.update(t, x, acceptance[t])
-            kept.record(t, x, lp)
-            run.step(t, kept.trace_ess(t), acceptance=float(acceptance[t]),
-                     proposal_scale=float(scale))
-        theta, log_target, _ = kept.flat()
-        return run.finish(theta, log_target, None, sampler=self.name, config=self.get_config(),
-                          seed=seed, chain=kept.chain(),
-                          extra_vars={"acceptance": (("step",), acceptance),
-                                      "proposal_scale": (("step",), scales)})
+        return run_random_walk(self, target, seed, progress, callback)
+
+
+def run_random_walk(sampler: Any, target: Any, seed: int | None, progress: bool,
+                    callback: Callback | None):
+    """Adaptive random-walk Metropolis chains on ``target`` with ``sampler``'s settings
+    (``n_steps``, ``n_chains``, ``burn_in``, ``thin``, ``proposal_sd``, ``adapt``,
+    ``target_acceptance``), recorded under its ``name`` and ``get_config()``: the body of
+    :class:`MetropolisHastings`, shared with samplers that fall back to it."""
+    n, c = sampler.n_steps, sampler.n_chains
+    bounds, rng, run, x, lp, kept = start_chains(
+        target, seed, n_steps=n, n_chains=c, burn_in=sampler.burn_in, thin=sampler.thin,
+        desc=sampler.name, progress=progress, callback=callback)
+    walk = AdaptiveRandomWalk(bounds, c, sampler.proposal_sd, sampler.burn_in, sampler.adapt,
+                              sampler.target_acceptance)
+    acceptance, scales = np.zeros(n), np.zeros(n)
+    for t in range(n):
+        scale = walk.scale
+        y, inside = walk.propose(x, rng)
+        lpy = evaluate_inside(run, target, y, inside)  # -inf outside, not evaluated
+        accept = inside & metropolis_accept(np.log(rng.random(c)), lp, lpy)
+        x[accept], lp[accept] = y[accept], lpy[accept]
+        acceptance[t], scales[t] = accept.mean(), scale
+        run.offer(x, lp)
+        walk.update(t, x, acceptance[t])
+        kept.record(t, x, lp)
+        run.step(t, kept.trace_ess(t), acceptance=float(acceptance[t]),
+                 proposal_scale=float(scale))
+    theta, log_target, _ = kept.flat()
+    return run.finish(theta, log_target, None, sampler=sampler.name,
+                      config=sampler.get_config(), seed=seed, chain=kept.chain(),
+                      extra_vars={"acceptance": (("step",), acceptance),
+                                  "proposal_scale": (("step",), scales)})

@@ -30,11 +30,10 @@ sampler draws its posterior (:mod:`mrfpe.models.hidden`).
 
 from __future__ import annotations
 
-from typing import Any
-
 from mrfpe.models import emissions
 from mrfpe.models.base import Model
 from mrfpe.models.discrete import MRF, Potential
+from mrfpe.models.gaussian import autonormal
 from mrfpe.models.graph import Graph, LatticeSpec, from_adjacency, from_networkx, lattice
 from mrfpe.models.hidden.model import hidden  # bound after the package: models.hidden is it
 from mrfpe.models.library import autologistic, ising, potts
@@ -46,9 +45,3 @@ __all__ = ["MRF", "Coupling", "EdgeCovariate", "Field", "Graph", "LatticeSpec", 
            "from_adjacency", "from_networkx", "get", "hidden", "ising", "lattice", "names",
            "potts", "registry"]
 
-
-def autonormal(*args: Any, **kwargs: Any) -> Model:
-    """Besag's auto-normal (Gaussian) MRF; see :func:`mrfpe.models.gaussian.autonormal`."""
-    from mrfpe.models.gaussian import autonormal as _autonormal
-
-    return _autonormal(*args, **kwargs)

@@ -419,6 +419,28 @@ def autonormal(graph: Any = 4, *, directional: bool = False,
         fewest terms of any estimator (the smallest coding): ten of the PL's
         curvature sds beyond its maximum, so fields scaled by ``c`` get a box scaled
         by ``1 / c^2``.
+
+    Returns
+    -------
+    GaussianMRF
+        Its estimators (``model.target(name, y)``): ``"pl"``, ``"coding"``,
+        ``"block"``, ``"exact"``/``"likelihood"`` (the exact Gaussian likelihood, which
+        exchange samples with the exact simulator) and ``"pl_adjusted"``.
+
+    Examples
+    --------
+    >>> from mrfpe import models
+    >>> m = models.autonormal(4)
+    >>> m.param_names()
+    ('mean', 'coupling', 'precision')
+    >>> y = m.simulate([1.0, 0.2, 2.0], shape=(16, 16), seed=0)
+    >>> m.target("likelihood", y).bounds.round(2).tolist()  # the precision's box follows y
+    [[-5.43, 6.9], [-0.25, 0.25], [0.0, 4.35]]
+
+    References
+    ----------
+    Besag, J. (1974). Spatial interaction and the statistical analysis of lattice
+    systems. JRSS B 36(2), 192-236.
     """
     return GaussianMRF(graph, directional=directional, periodic=periodic,
                        covariates=covariates, bounds=bounds)

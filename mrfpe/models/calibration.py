@@ -223,7 +223,9 @@ class AdjustedPL(Target):
 
     Attributes
     ----------
-    theta_pl, theta_ml : the MPLE and the adjusted target's centre.
+    theta_pl, theta_ml : the MPLE and the adjusted target's centre (with
+        ``align="moments"``: the Monte Carlo MLE plus the posterior mean's third-order
+        shift, so not ``mle.theta``; ``describe()["theta_mode"]``).
     bounds : the PL's box narrowed to the bounding box of the parameters that the map
         ``to_pl`` sends into it (the density is -inf at the others).
     pl_covariance : exp(PL)'s covariance (:func:`mrfpe.models.pl_spread.pl_moments`); its

@@ -68,7 +68,7 @@ def split_forbidden(psi: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
 
 
 def allowed_dot(psi: np.ndarray, S: np.ndarray) -> np.ndarray:
-    """``S_u . psi_n`` (N, U) for feature counts ``S`` (U, P): ``-inf`` where ``S_u`` uses a
+    """``S_u @ psi_n`` (N, U) for feature counts ``S`` (U, P): ``-inf`` where ``S_u`` uses a
     ``-inf`` (forbidden) entry of ``psi_n``, never ``0 * -inf = NaN``."""
     psi = np.atleast_2d(np.asarray(psi, dtype=np.float64))
     S = np.atleast_2d(np.asarray(S, dtype=np.float64))
@@ -165,7 +165,7 @@ def softmax_rows_log_prob(groups: Sequence[ConditionalRows], psi: np.ndarray,
 
 def _rows_lse(g: ConditionalRows, sl: slice, psiT: np.ndarray,
               fT: np.ndarray | None) -> np.ndarray:
-    """``log(1 + sum_k exp(D_k . psi))`` (r, N) of the rows ``sl``: forbidden alternatives
+    """``log(1 + sum_k exp(D_k @ psi))`` (r, N) of the rows ``sl``: forbidden alternatives
     left out, ``+inf`` where the observed alternative is forbidden."""
     D = g.D[sl]
     r, K1, P = D.shape

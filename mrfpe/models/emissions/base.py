@@ -260,7 +260,7 @@ def resolve_bounds(names: tuple[str, ...], default: np.ndarray,
 
 def ordered_prior_draw(draw: Callable[[int, float], float], bound: BoundEmission,
                        rng: np.random.Generator, tries: int = 10000) -> np.ndarray:
-    """A prior draw of the ``q`` locations restricted to ``v_0 < ... < v_{q-1}``.
+    """A prior draw of the ``q`` locations restricted to increasing order (``v_0 < v_1 < …``).
 
     ``draw(k, u)`` is location ``k``'s prior inverse CDF at ``u``. Where the ``q``
     priors are the same (equal bounds, all flat or none) the restricted prior is that of

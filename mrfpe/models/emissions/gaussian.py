@@ -50,10 +50,11 @@ class Gaussian(Emission):
     ----------
     shared_sd : bool
         One ``sd`` for every state (default) or ``sd_0 .. sd_{q-1}``.
-    mean_prior : (m0, s0) or None
-        Normal prior of every mean (default: mean and range of the observed data).
-    sd_prior : (a0, b0) or None
-        Inverse-gamma prior (shape, scale) of every variance (default ``(1, var(y)/100)``).
+    mean_prior : tuple or None
+        ``(m0, s0)``: the normal prior of every mean (default: mean and range of the observed data).
+    sd_prior : tuple or None
+        ``(a0, b0)``: the inverse-gamma prior (shape, scale) of every variance
+        (default ``(1, var(y)/100)``).
     """
 
     name = "gaussian"

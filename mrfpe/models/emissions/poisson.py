@@ -42,8 +42,8 @@ class Poisson(Emission):
     ----------
     exposure : str or None
         Name of the node covariate holding ``E_i > 0`` (default: no exposure, ``E = 1``).
-    rate_prior : (a0, b0) or None
-        Gamma prior (shape, rate) of every rate.
+    rate_prior : tuple or None
+        ``(a0, b0)``: the gamma prior (shape, rate) of every rate.
     """
 
     name = "poisson"

@@ -12,9 +12,9 @@ from __future__ import annotations
 import inspect
 from typing import Any
 
-from mrfpe._plugins import short_repr
+from mrfpe._plugins import Registry, short_repr
 
-__all__ = ["check_builds", "check_factory", "not_an_instance"]
+__all__ = ["build", "check_builds", "check_factory", "not_an_instance"]
 
 
 def check_factory(obj: Any, base: type, kind: str, base_name: str) -> None:
@@ -52,3 +52,28 @@ def check_builds(obj: Any, base: type, base_name: str) -> None:
         raise TypeError(f"{what} raised {type(exc).__name__}: {exc}") from None
     if not isinstance(built, base):
         raise not_an_instance(what, built, base_name)
+
+
+def build(registry: Registry, name: str, kwargs: dict[str, Any], base: type,
+          base_name: str) -> Any:
+    """The plugin registered as ``name`` in ``registry``, built with ``kwargs``.
+
+    Settings the factory does not take are a ``ValueError`` naming them; a third-party
+    plugin's failure is named as its own (:meth:`Registry.calling`); a result that is
+    not a ``base`` is a ``TypeError`` naming the plugin.
+    """
+    info = registry.info(name)
+    factory = info.obj
+    try:
+        inspect.signature(factory).bind(**kwargs)
+    except TypeError as exc:
+        params = ", ".join(inspect.signature(factory).parameters)
+        raise ValueError(f"{registry.kind} {name!r} takes {params or 'no settings'}; got "
+                         f"{', '.join(kwargs) or 'none'} ({exc})") from None
+    except ValueError:  # pragma: no cover - no signature to check against
+        pass
+    with registry.calling(info):
+        built = factory(**kwargs)
+    if not isinstance(built, base):
+        raise not_an_instance(registry.label(info), built, base_name)
+    return built

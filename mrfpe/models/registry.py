@@ -15,10 +15,9 @@ a third-party plugin, so a build that hangs or ends the process is caught there.
 
 from __future__ import annotations
 
-import inspect
 from typing import Any
 
-from mrfpe._factories import check_builds, check_factory, not_an_instance
+from mrfpe._factories import build, check_builds, check_factory
 from mrfpe._plugins import Registry
 from mrfpe.models.base import Model
 
@@ -66,18 +65,4 @@ def get(name: str, /, **kwargs: Any) -> Model:
     mrfpe._plugins.PluginError
         If a third-party plugin fails otherwise while building (the message names it).
     """
-    info = registry.info(name)
-    factory = info.obj
-    try:
-        inspect.signature(factory).bind(**kwargs)
-    except TypeError as exc:
-        params = ", ".join(inspect.signature(factory).parameters)
-        raise ValueError(f"model {name!r} takes {params or 'no settings'}; got "
-                         f"{', '.join(kwargs) or 'none'} ({exc})") from None
-    except ValueError:  # pragma: no cover - no signature to check against
-        pass
-    with registry.calling(info):
-        model = factory(**kwargs)
-    if not isinstance(model, Model):
-        raise not_an_instance(registry.label(info), model, _BASE)
-    return model
+    return build(registry, name, kwargs, Model, _BASE)

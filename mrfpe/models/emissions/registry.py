@@ -9,10 +9,9 @@ listed with its reason and never breaks the others.
 
 from __future__ import annotations
 
-import inspect
 from typing import Any
 
-from mrfpe._factories import check_builds, check_factory, not_an_instance
+from mrfpe._factories import build, check_builds, check_factory
 from mrfpe._plugins import Registry
 from mrfpe.models.emissions.base import Emission
 
@@ -51,16 +50,4 @@ def get(name: str, /, **kwargs: Any) -> Emission:
     TypeError
         If the plugin does not return an Emission.
     """
-    info = registry.info(name)
-    factory = info.obj
-    try:
-        inspect.signature(factory).bind(**kwargs)
-    except TypeError as exc:
-        params = ", ".join(inspect.signature(factory).parameters)
-        raise ValueError(f"emission {name!r} takes {params or 'no settings'}; got "
-                         f"{', '.join(kwargs) or 'none'} ({exc})") from None
-    with registry.calling(info):
-        built = factory(**kwargs)
-    if not isinstance(built, Emission):
-        raise not_an_instance(registry.label(info), built, _BASE)
-    return built
+    return build(registry, name, kwargs, Emission, _BASE)

@@ -16,11 +16,15 @@ the MRF's parameters (:mod:`mrfpe.samplers.hidden_steps`), started from mean-fie
   (per step);
 * the attributes ``label_mcse_max`` and ``priors`` (JSON: every prior, stated).
 
-With ``method="pl"`` the MRF's parameters are drawn from ``exp(PL)`` of the labels,
-which makes the result a *pseudo-posterior*: its diagnostics say so (the ``bias``
-attribute, which marks it unreliable as an estimate of the posterior). States empty in
-most sweeps (the data support fewer states) and label probabilities with a Monte Carlo
-error above ``LABEL_MCSE_MAX`` are flagged the same way, with the reason.
+The target's ``method`` says how the MRF's parameters are drawn given the labels
+(:mod:`mrfpe.samplers.hidden_theta`). With ``"pl"`` they are drawn from ``exp(PL)`` of the
+labels, which makes the result a *pseudo-posterior*: its diagnostics say so (the
+``bias`` attribute, which marks it unreliable as an estimate of the posterior).
+``"exchange"`` is flagged when its auxiliary chains were shorter than ``mixing_factor``
+autocorrelation times at the posterior mean, ``"surrogate"`` when the surrogate's
+validated mean error exceeds its tolerance. States empty in most sweeps (the data
+support fewer states) and label probabilities with a Monte Carlo error above
+``LABEL_MCSE_MAX`` are flagged the same way, with the reason.
 
 On any other target -- one with no hidden labels -- the parameters are the only block and
 the sampler is random-walk Metropolis (as ``mh``, adapted during burn-in only).
@@ -40,6 +44,7 @@ from mrfpe.models.hidden.target import HiddenTarget
 from mrfpe.samplers.base import Callback, Sampler, check_choice, check_positive_int
 from mrfpe.samplers.hidden_labels import LabelRecord, param_diagnostics
 from mrfpe.samplers.hidden_steps import hidden_step, make_walks, start_state
+from mrfpe.samplers.hidden_theta import ThetaUpdate, make_theta_update
 from mrfpe.samplers.kit import (
     AdaptiveRandomWalk,
     KeptStates,
@@ -82,6 +87,12 @@ class HiddenSampler(Sampler):
         classification of the data with the MRF's parameters at 0.
     n_batches : int
         Batches per chain of the label probabilities' Monte Carlo error.
+    aux_sweeps : "auto" | int
+        ``method="exchange"``: sweeps of the auxiliary chain per proposal, started from
+        the chain's labels; ``"auto"``: ``10 τ`` of the MRF's simulator at the start point
+        (at least 10, at most ``max_aux_sweeps``).
+    max_aux_sweeps : int
+        Cap of the automatic choice.
     """
 
     name = "hidden"
@@ -90,7 +101,8 @@ class HiddenSampler(Sampler):
     def __init__(self, n_steps: int = 3000, n_chains: int = 4, burn_in: int = 1000,
                  thin: int = 1, theta_steps: int = 3, proposal_sd: float = 0.05,
                  adapt: bool = True, target_acceptance: float = 0.3, labels: str = "gibbs",
-                 init: str = "em", n_batches: int = 20):
+                 init: str = "em", n_batches: int = 20, aux_sweeps: int | str = "auto",
+                 max_aux_sweeps: int = 2000):
         self.n_steps, self.burn_in, self.thin = check_chain_length(n_steps, burn_in, thin)
         self.n_chains = check_positive_int("n_chains", n_chains)
         self.theta_steps = check_positive_int("theta_steps", theta_steps)
@@ -99,6 +111,10 @@ class HiddenSampler(Sampler):
         self.labels = check_choice("labels", labels, LABEL_KERNELS)
         self.init = check_choice("init", init, INITS)
         self.n_batches = check_positive_int("n_batches", n_batches, minimum=2)
+        if aux_sweeps != "auto":
+            aux_sweeps = check_positive_int("aux_sweeps", aux_sweeps)
+        self.aux_sweeps = aux_sweeps
+        self.max_aux_sweeps = check_positive_int("max_aux_sweeps", max_aux_sweeps)
 
     def run(self, target: Any, *, seed: int | None = None, progress: bool = False,
             callback: Callback | None = None):
@@ -116,13 +132,20 @@ class HiddenSampler(Sampler):
         point = self._start(target)
         self._check_kernel(target, point)
         state = start_state(target, point, C, rng)
+        update = make_theta_update(target, aux_sweeps=self.aux_sweeps,
+                                   max_aux_sweeps=self.max_aux_sweeps)
+        mrf_free = bool(target.free[: target.n_mrf].any())
+        prepare_at, prepare_seed = update.prepare_at(self.burn_in), int(rng.integers(2**63))
         walks = make_walks(target, C, self.proposal_sd, self.burn_in, self.adapt,
                            self.target_acceptance)
         kept = KeptStates(n, self.burn_in, self.thin, C, len(target.param_names))
         record = LabelRecord(C, target.n_nodes, target.q, n, self.burn_in, self.n_batches)
         acceptance = np.full((2, n), np.nan)
         for t in range(n):
-            state, info = hidden_step(target, state, walks, rng, theta_steps=self.theta_steps,
+            if t == prepare_at and mrf_free:
+                update.prepare(state, prepare_seed)
+            state, info = hidden_step(target, state, walks, rng, theta_update=update,
+                                      theta_steps=self.theta_steps,
                                       swendsen_wang=self.labels == "swendsen_wang",
                                       acc=record.buffer(t))
             record.close(t, state.labels)
@@ -133,7 +156,8 @@ class HiddenSampler(Sampler):
             run.offer(theta, state.log_target)
             kept.record(t, theta, state.log_target)
             run.step(t, kept.trace_ess(t), **info)
-        return self._finish(target, run, kept, record, acceptance, seed)
+        return self._finish(target, run, kept, record, acceptance, seed, update,
+                            int(rng.integers(2**63)))
 
     def _start(self, target: HiddenTarget) -> PointEstimate:
         if self.init == "em":
@@ -163,7 +187,7 @@ class HiddenSampler(Sampler):
                 walk.update(t, params[:, block & target.free], info[key])
 
     def _finish(self, target: HiddenTarget, run: Run, kept: KeptStates, record: LabelRecord,
-                acceptance: np.ndarray, seed: int | None):
+                acceptance: np.ndarray, seed: int | None, update: ThetaUpdate, seed2: int):
         theta, log_target, _ = kept.flat()
         prob, mcse, occupancy, empty = record.result()
         rhat, ess = param_diagnostics(kept.theta)
@@ -174,7 +198,9 @@ class HiddenSampler(Sampler):
                  "mrf_acceptance": (("step",), acceptance[0]),
                  "emission_acceptance": (("step",), acceptance[1])}
         mcse_max = float(np.nanmax(mcse)) if np.isfinite(mcse).any() else float("nan")
-        attrs = {"method": target.method, "labels_kernel": self.labels,
+        reasons = (update.reasons(theta, seed2) if target.free[: target.n_mrf].any() else [])
+        attrs = {**(update.attrs() if target.free[: target.n_mrf].any() else {}),
+                 "method": target.method, "labels_kernel": self.labels,
                  "label_mcse_max": mcse_max, "priors": json.dumps(
                      {**target.emission.describe_prior(),
                       "mrf": "flat on the bounds of every free MRF parameter"}),
@@ -182,16 +208,14 @@ class HiddenSampler(Sampler):
                                  "p(y_i | x_i) + log prior of the emission (over labels too)"}
         return run.finish(theta, log_target, None, sampler=self.name, config=self.get_config(),
                           seed=seed, chain=kept.chain(), bias=self._reasons(
-                              target, mcse_max, empty), extra_vars=extra, extra_attrs=attrs)
+                              target, mcse_max, empty, reasons), extra_vars=extra,
+                          extra_attrs=attrs)
 
     @staticmethod
-    def _reasons(target: HiddenTarget, mcse_max: float, empty: np.ndarray) -> str | None:
+    def _reasons(target: HiddenTarget, mcse_max: float, empty: np.ndarray,
+                 method_reasons: list[str]) -> str | None:
         """What makes the result no estimate of the posterior, in words (or None)."""
-        out = []
-        if target.method == "pl" and target.free[: target.n_mrf].any():
-            out.append("pseudo-posterior: the MRF's parameters are drawn from exp(PL) of the "
-                       "labels (method='pl'), not from the likelihood, so their spread is not "
-                       "the posterior's (the labels and the emission given them are exact)")
+        out = list(method_reasons)
         full = np.flatnonzero(empty > EMPTY_STATE_MAX)
         if full.size:
             out.append(f"state(s) {', '.join(map(str, full))} held no node in "

@@ -13,9 +13,11 @@ parameter (the MRF's, then the emission's; fixed ones at their values). One step
    of the emission (:meth:`BoundEmission.update
    <mrfpe.models.emissions.base.BoundEmission.update>`), or ``theta_steps`` random-walk
    Metropolis steps on ``sum_i log p(y_i | x_i, φ) + log prior(φ)`` where there is none;
-3. the MRF's free parameters given the labels (``method="pl"``): ``theta_steps``
-   random-walk Metropolis steps on Besag's pseudolikelihood of the labels with the flat
-   prior on their bounds -- a pseudo-posterior, since ``exp(PL)`` is not ``p(x | θ)``.
+3. the MRF's free parameters given the labels, by the target's ``method``
+   (:mod:`mrfpe.samplers.hidden_theta`): random-walk Metropolis on the labels'
+   pseudolikelihood (a pseudo-posterior, since ``exp(PL)`` is not ``p(x | θ)``), on the
+   calibrated pseudolikelihood, by the exchange algorithm, or on the pre-computed
+   surrogate.
 
 Each block leaves its full conditional (or, for the MRF's parameters, the pseudo
 conditional) invariant; their cycle is the sampler. The random walks are the kit's
@@ -33,7 +35,7 @@ from mrfpe.models.hidden.target import HiddenTarget
 from mrfpe.samplers.kit import AdaptiveRandomWalk, metropolis_accept
 
 __all__ = ["HiddenState", "Walks", "hidden_step", "joint_log_target", "make_walks",
-           "start_state"]
+           "start_state", "walk_block"]
 
 
 class HiddenState(NamedTuple):
@@ -132,7 +134,7 @@ def _label_sweeps(target: HiddenTarget, state: HiddenState, rng: np.random.Gener
                            None if acc is None else acc[c])
 
 
-def _walk_block(walk: AdaptiveRandomWalk, idx: np.ndarray, params: np.ndarray,
+def walk_block(walk: AdaptiveRandomWalk, idx: np.ndarray, params: np.ndarray,
                 log_density: Any, rng: np.random.Generator) -> float:
     """One random-walk Metropolis step of the parameters ``idx`` of every chain, in place;
     ``log_density(c, vectors (k, D)) -> (k,)``. Returns the acceptance rate."""
@@ -173,24 +175,7 @@ def _emission_block(target: HiddenTarget, state: HiddenState, walk: AdaptiveRand
         return data + target.emission.log_prior(em)
 
     idx = n_mrf + np.flatnonzero(free)
-    return float(np.mean([_walk_block(walk, idx, state.params, log_density, rng)
-                          for _ in range(theta_steps)]))
-
-
-def _mrf_block(target: HiddenTarget, state: HiddenState, walk: AdaptiveRandomWalk | None,
-               rng: np.random.Generator, theta_steps: int) -> float:
-    """The MRF's free parameters of every chain, in place (random-walk Metropolis on the
-    labels' pseudolikelihood -- the MRF's ``"pl"`` estimator, from the labels' conditional
-    rows, built once --, flat prior on the bounds); the acceptance rate."""
-    if walk is None:
-        return float("nan")
-    idx = np.flatnonzero(target.free[: target.n_mrf])
-    rows = [target.design.conditional_rows(x[None]) for x in state.labels]
-
-    def log_density(c: int, trial: np.ndarray) -> np.ndarray:
-        return target.log_pl_rows(rows[c], trial[:, : target.n_mrf])
-
-    return float(np.mean([_walk_block(walk, idx, state.params, log_density, rng)
+    return float(np.mean([walk_block(walk, idx, state.params, log_density, rng)
                           for _ in range(theta_steps)]))
 
 
@@ -207,8 +192,9 @@ def _log_targets(target: HiddenTarget, state: HiddenState) -> np.ndarray:
 
 
 def hidden_step(target: HiddenTarget, state: HiddenState, walks: Walks,
-                rng: np.random.Generator, *, theta_steps: int, swendsen_wang: bool,
-                acc: np.ndarray | None = None) -> tuple[HiddenState, dict]:
+                rng: np.random.Generator, *, theta_update: Any, theta_steps: int,
+                swendsen_wang: bool, acc: np.ndarray | None = None
+                ) -> tuple[HiddenState, dict]:
     """One step of every chain (labels, emission, MRF; see the module docstring).
 
     ``acc`` (C, n, q), when given, receives each chain's Gibbs conditional probabilities.
@@ -216,7 +202,7 @@ def hidden_step(target: HiddenTarget, state: HiddenState, walks: Walks,
     """
     _label_sweeps(target, state, rng, acc, swendsen_wang)
     em_acc = _emission_block(target, state, walks.emission, rng, theta_steps)
-    mrf_acc = _mrf_block(target, state, walks.mrf, rng, theta_steps)
+    mrf_acc = theta_update.step(state, walks.mrf, rng, theta_steps)
     lt = _log_targets(target, state)
     return HiddenState(state.labels, state.params, lt), {"mrf_acceptance": mrf_acc,
                                                          "emission_acceptance": em_acc}

@@ -19,7 +19,9 @@
 from ``mrfpe.models.hidden``.)
 
 :func:`hidden` declares the model (:class:`HiddenModel`); its ``target("hidden", y,
-method=, fixed=, bounds=, mask=, covariates=)`` is a :class:`HiddenTarget`;
+method=, fixed=, bounds=, mask=, covariates=, surrogate=)`` is a :class:`HiddenTarget`;
+:func:`build_surrogate` pre-computes the :class:`Surrogate` of ``method="surrogate"``
+(on a ``dask.distributed`` client if given);
 :func:`icm` and :func:`mean_field_em` are point estimates; the ``hidden`` sampler
 (:mod:`mrfpe.samplers.hidden`) draws the posterior.
 """
@@ -28,6 +30,8 @@ from __future__ import annotations
 
 from mrfpe.models.hidden.model import HiddenModel, hidden
 from mrfpe.models.hidden.point import icm, mean_field_em
+from mrfpe.models.hidden.surrogate import Surrogate, build_surrogate
 from mrfpe.models.hidden.target import METHODS, HiddenTarget
 
-__all__ = ["METHODS", "HiddenModel", "HiddenTarget", "hidden", "icm", "mean_field_em"]
+__all__ = ["METHODS", "HiddenModel", "HiddenTarget", "Surrogate", "build_surrogate", "hidden",
+           "icm", "mean_field_em"]

@@ -50,8 +50,10 @@ def _mapping(name: str, value: Any) -> Any:
 
 HIDDEN_OPTIONS: tuple[Option, ...] = (
     Option("method", " | ".join(repr(m) for m in METHODS), "pl", choice_check(*METHODS),
-           "how the sampler draws the MRF's parameters given the labels (pl: random-walk "
-           "Metropolis on Besag's pseudolikelihood; a pseudo-posterior)"),
+           "how the sampler draws the MRF's parameters given the labels: pl (Besag's "
+           "pseudolikelihood; a pseudo-posterior), pl_adjusted (calibrated), exchange "
+           "(auxiliary labels by the MRF's simulator), surrogate (pre-computed Gaussian "
+           "synthetic likelihood of the sufficient statistics)"),
     Option("fixed", "mapping name -> value | None", None, _mapping,
            "known parameters, held at these values"),
     Option("bounds", "mapping name -> (low, high) | None", None, _mapping,
@@ -60,6 +62,10 @@ HIDDEN_OPTIONS: tuple[Option, ...] = (
            "True where the observation is missing (integrated over)"),
     Option("covariates", "mapping name -> array | None", None, optional(_mapping),
            "the MRF's node/edge covariates and the emission's (e.g. a Poisson exposure)"),
+    Option("surrogate", "Surrogate | None", None, lambda n, v: v,
+           "method='surrogate': a pre-computed surrogate (mrfpe.models.hidden."
+           "build_surrogate; reusable for every image of the same shape); None: the "
+           "sampler builds one from its seed"),
 )
 
 
@@ -166,7 +172,8 @@ class HiddenModel(Model):
         bound.check_fixed({k: v for k, v in fixed.items() if k not in mrf_names})
         return HiddenTarget(model=self, design=design, emission=bound, y=y, observed=observed,
                             node_shape=tuple(node_shape), mrf_names=tuple(mrf_names),
-                            mrf_bounds=mrf_bounds, fixed=fixed, method=options["method"])
+                            mrf_bounds=mrf_bounds, fixed=fixed, method=options["method"],
+                            surrogate=options["surrogate"])
 
     def describe(self) -> dict:
         return {**super().describe(), "mrf": self.mrf.describe(),

@@ -13,7 +13,7 @@ mean-field-like approximation of the log marginal likelihood ``log p(y | θ)`` o
 Celeux, Forbes & Peyrard (2003) with every node's neighbours fixed at the reference
 labelling (:mod:`mrfpe.models.hidden.meanfield`; by default the emission's starting
 classification of the data, :meth:`with_reference` sets another), plus the emission
-parameters' log prior: a cheap, deterministic surrogate any sampler or
+parameters' log prior: a cheap, deterministic approximation any sampler or
 :func:`mrfpe.targets.maximise` can use. The ``hidden`` sampler does not use it: it
 integrates over the labels.
 """
@@ -28,12 +28,14 @@ from mrfpe.models.design import ConditionalRows, Design, softmax_rows_log_prob
 from mrfpe.models.emissions.base import BoundEmission
 from mrfpe.models.hidden.field import LabelField
 from mrfpe.models.hidden.meanfield import approx_log_lik, soft_design
+from mrfpe.models.hidden.surrogate import check_surrogate
 from mrfpe.targets.base import Target
 
 __all__ = ["METHODS", "HiddenTarget"]
 
-#: The ways of drawing the MRF's parameters given the labels.
-METHODS = ("pl",)
+#: The ways of drawing the MRF's parameters given the labels
+#: (:mod:`mrfpe.samplers.hidden_theta`).
+METHODS = ("pl", "pl_adjusted", "exchange", "surrogate")
 
 
 class HiddenTarget(Target):
@@ -48,7 +50,9 @@ class HiddenTarget(Target):
     all_names : every parameter, the MRF's then the emission's
     free : (D,) bool; fixed_values : (D,) the fixed values (NaN where free)
     n_mrf : how many of ``all_names`` are the MRF's
-    method : how the sampler draws the MRF's parameters (``"pl"``)
+    method : how the sampler draws the MRF's parameters (:data:`METHODS`)
+    surrogate : the pre-computed :class:`~mrfpe.models.hidden.surrogate.Surrogate` of
+        ``method="surrogate"`` (``None``: the sampler builds one from its seed)
     """
 
     data_kind = "image"
@@ -56,7 +60,8 @@ class HiddenTarget(Target):
     def __init__(self, *, model: Any, design: Design, emission: BoundEmission, y: np.ndarray,
                  observed: np.ndarray, node_shape: tuple[int, ...],
                  mrf_names: tuple[str, ...], mrf_bounds: np.ndarray, fixed: dict[str, float],
-                 method: str, reference: np.ndarray | None = None) -> None:
+                 method: str, reference: np.ndarray | None = None,
+                 surrogate: Any = None) -> None:
         self.model, self.design, self.emission = model, design, emission
         self.field = LabelField(design)
         self.y, self.observed = y, observed
@@ -68,6 +73,7 @@ class HiddenTarget(Target):
         self.fixed_values = np.array([fixed.get(n, np.nan) for n in self.all_names])
         self.fixed = dict(fixed)
         self.method = method
+        self.surrogate = surrogate
         self.param_names = tuple(n for n, f in zip(self.all_names, self.free, strict=True) if f)
         self.bounds = self.all_bounds[self.free]
         self.name = f"{model.name}:hidden"
@@ -76,6 +82,8 @@ class HiddenTarget(Target):
         for a in (self.free, self.fixed_values, self.all_bounds, self.bounds, self.y,
                   self.observed):
             a.setflags(write=False)
+        if surrogate is not None:
+            check_surrogate(surrogate, self)
 
     # -- parameter vectors --------------------------------------------------------------------
     @property
@@ -158,4 +166,6 @@ class HiddenTarget(Target):
                 "graph": self.design.graph.describe(), "mrf": self.model.mrf.describe(),
                 "emission": self.emission.emission.describe(),
                 "priors": self.emission.describe_prior(),
-                "mrf_prior": "flat on the bounds of every free MRF parameter"}
+                "mrf_prior": "flat on the bounds of every free MRF parameter",
+                **({"surrogate": self.surrogate.describe()} if self.surrogate is not None
+                   else {})}

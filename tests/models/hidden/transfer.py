@@ -146,3 +146,35 @@ def forward_backward_batch(H: int, W: int, q: int, coupling: float, field, L: np
         for r in range(H):
             marg[:, r * W + c] = p @ (cols[:, r][:, None] == np.arange(q)[None]).astype(float)
     return log_z, marg
+
+
+def log_z_product(H: int, W: int, q: int, coupling: float, field=None, L=None) -> float:
+    """``log Z`` of the first-order Potts field by the transfer matrix in product form.
+
+    The horizontal transfer matrix factorises over rows, ``exp(β Σ_r [a_r = b_r]) = Π_r
+    M[a_r, b_r]`` with ``M = 1 + (e^β - 1) I``, so a column vector times it is ``H``
+    products with the ``q x q`` matrix ``M`` along the axes of the ``(q,) * H`` array:
+    ``O(H q^(H+1))`` per column instead of ``O(q^(2H))``. Scaled at every column.
+    """
+    field = np.zeros(q) if field is None else np.asarray(field, float)
+    cols = column_states(H, q)
+    base = _intra(cols, coupling, field)
+    M = np.ones((q, q)) + np.expm1(coupling) * np.eye(q)
+    total, a = 0.0, None
+    for c in range(W):
+        node = base.copy()
+        if L is not None:
+            node += np.asarray(L, float)[(np.arange(H) * W + c)[None, :], cols].sum(axis=1)
+        top = node.max()
+        e = np.exp(node - top)
+        if a is None:
+            a = e
+        else:
+            t = a.reshape((q,) * H)  # one axis per row (M is the same for every row)
+            for ax in range(H):
+                t = np.moveaxis(np.tensordot(t, M, axes=([ax], [0])), -1, ax)
+            a = t.reshape(-1) * e
+        s = a.sum()
+        a = a / s
+        total += np.log(s) + top
+    return float(total)

@@ -341,17 +341,28 @@ class MRF(Model):
                  n_sweeps: int = 200, thin: int = 10, init: Any = "random") -> np.ndarray:
         """Draw ``n`` configurations at ``theta`` (see :func:`mrfpe.models.simulate.simulate`).
 
-        Returns ``(n, H, W)`` on a lattice, ``(n, n_nodes)`` on a fixed graph.
+        Returns ``(n, H, W)`` on a lattice, ``(n, n_nodes)`` on a fixed graph; a ``(B, d)``
+        theta runs one chain per row (:func:`mrfpe.models.simulate_batch.simulate_batch`)
+        and returns ``(B, n, H, W)`` or ``(B, n, n_nodes)``.
         """
         from mrfpe.models.simulate import check_simulation_size, simulate
+        from mrfpe.models.simulate_batch import check_batch_size, check_theta_rows, simulate_batch
 
-        check_simulation_size(self.graph_spec, shape, n, n_sweeps, thin)  # before the graph
+        rows = np.ndim(theta) == 2
+        if rows and not covariates:  # before any work: the names need no graph
+            check_theta_rows(theta, self.param_names())
+        if rows:  # memory checks before the graph
+            check_batch_size(self.graph_spec, shape, len(theta), n, n_sweeps, thin)
+        else:
+            check_simulation_size(self.graph_spec, shape, n, n_sweeps, thin)
         design, names, _ = self.compile(shape, covariates)
-        th = _one_theta(theta, names)
-        draws = simulate(design, design.psi(th[None])[0], n=n, seed=seed, method=method,
-                         n_sweeps=n_sweeps, thin=thin, init=init)
+        opts = {"seed": seed, "method": method, "n_sweeps": n_sweeps, "thin": thin, "init": init}
+        if rows:
+            draws = simulate_batch(design, design.psi(check_theta_rows(theta, names)), n, **opts)
+        else:
+            draws = simulate(design, design.psi(_one_theta(theta, names)[None])[0], n, **opts)
         g = design.graph
-        return draws.reshape(draws.shape[0], *(g.shape if g.shape is not None else (g.n_nodes,)))
+        return draws.reshape(*draws.shape[:-1], *(g.shape if g.shape is not None else (g.n_nodes,)))
 
     def describe(self) -> dict:
         out = super().describe()

@@ -251,17 +251,20 @@ class SurrogateUpdate(ThetaUpdate):
         return density
 
     def reasons(self, theta: np.ndarray, seed: int) -> list[str]:
-        err = self.surrogate.validation_error
-        if err <= SURROGATE_TOL:
+        mrf = self.target.full(theta)[:, self.idx]
+        self.error = self.surrogate.error_within(mrf.min(axis=0), mrf.max(axis=0))
+        if self.error <= SURROGATE_TOL:
             return []
-        return [f"the surrogate's mean misses the simulated one by up to {err:.2f} posterior "
-                f"sds (tolerance {SURROGATE_TOL}) after {self.surrogate.n_design} design "
-                f"points: build it with a larger max_design or n_sweeps"]
+        return [f"the surrogate's mean misses the simulated one by up to {self.error:.2f} "
+                f"posterior sds in the posterior's range (tolerance {SURROGATE_TOL}) after "
+                f"{self.surrogate.n_design} design points: build it with a larger max_design "
+                f"or n_sweeps (mrfpe.models.hidden.build_surrogate)"]
 
     def attrs(self) -> dict:
         d = self.surrogate.describe()
         return {"surrogate_n_design": d["n_design"],
                 "surrogate_validation_error": d["validation_error"],
+                "surrogate_error_in_range": float(getattr(self, "error", math.nan)),
                 "surrogate_min_ess": d["min_ess"]}
 
 

@@ -27,8 +27,9 @@ Validation. A mean off by ``δμ`` moves the synthetic posterior of ``θ`` by ab
 simulated at the midpoint of every interval of the design and compared with the
 interpolant; intervals with ``z > tol`` are split (the midpoint joins the design) until
 none fails or ``max_design`` points are spent. In several dimensions ``n_validation``
-Sobol points are checked. :attr:`Surrogate.validation_error` is the largest ``z``
-left; the sampler flags its result when it exceeds the tolerance.
+Sobol points are checked. :meth:`Surrogate.error_within` is the largest ``z`` of the
+checks in the posterior's range; the sampler flags its result when it exceeds the
+tolerance :data:`SURROGATE_TOL` (an error far from the posterior does not move it).
 
 Each design point's simulations (the MRF's simulator, Swendsen-Wang where it applies)
 take a seed derived from ``seed`` and the point itself, so a design simulated on a
@@ -51,11 +52,14 @@ from mrfpe.models.design import Design
 from mrfpe.models.simulate import simulate
 from mrfpe.validation import check_positive_int, check_seed
 
-__all__ = ["SURROGATE_TOL", "PointMoments", "Surrogate", "build_surrogate", "check_surrogate",
-           "is_log_linear", "statistic_chain"]
+__all__ = ["MIN_ESS", "SURROGATE_TOL", "PointMoments", "Surrogate", "build_surrogate",
+           "check_surrogate", "is_log_linear", "statistic_chain"]
 
 #: Largest mean error of the surrogate, in posterior sds of θ, a reliable result may have.
-SURROGATE_TOL = 0.1
+SURROGATE_TOL = 0.15
+#: Effective draws a design point's chain is lengthened to (its mean's noise: 0.05 sd).
+MIN_ESS = 400.0
+_NO_CHECKS = np.empty((0, 3))
 #: Bytes of draws held at once per chunk of a statistics chain.
 _CHUNK_BYTES = 2e7
 
@@ -69,10 +73,12 @@ def is_log_linear(design: Design, d: int) -> bool:
 
 
 def statistic_chain(design: Design, psi: np.ndarray, columns: np.ndarray, n_sweeps: int, *,
-                    seed: int, init: Any = "random", burn_in: int = 0) -> np.ndarray:
+                    seed: int, init: Any = "random", burn_in: int = 0
+                    ) -> tuple[np.ndarray, np.ndarray]:
     """``S(x)[columns]`` after each of ``n_sweeps`` sweeps of the MRF's simulator at ``psi``
-    (Swendsen-Wang where it applies, else Gibbs), after ``burn_in`` sweeps: (n_sweeps, k).
-    The draws are held a chunk at a time, never all at once."""
+    (Swendsen-Wang where it applies, else Gibbs), after ``burn_in`` sweeps: ``(n_sweeps,
+    k)``, and the chain's last state (to continue it). The draws are held a chunk at a
+    time, never all at once."""
     rng = np.random.default_rng(seed)
     chunk = int(max(1, min(250, _CHUNK_BYTES // (8 * design.graph.n_nodes))))
     rows, done, sweeps = [], 0, burn_in + 1
@@ -82,7 +88,22 @@ def statistic_chain(design: Design, psi: np.ndarray, columns: np.ndarray, n_swee
                      n_sweeps=sweeps, thin=1, init=init)
         rows.append(design.statistics(y)[:, columns])
         init, done, sweeps = y[-1], done + m, 1
-    return np.concatenate(rows)
+    return np.concatenate(rows), np.asarray(init)
+
+
+def _tau(s: np.ndarray) -> float:
+    """The largest integrated autocorrelation time of the columns of ``s`` (emcee's)."""
+    import logging
+
+    from emcee.autocorr import integrated_time
+
+    logging.getLogger("emcee.autocorr").setLevel(logging.ERROR)  # short chains are judged here
+    sd = s.std(axis=0)
+    moving = sd > 0
+    if not moving.any():
+        return 1.0
+    z = (s[:, moving] - s[:, moving].mean(axis=0)) / sd[moving]
+    return max(1.0, float(np.max(integrated_time(z[:, None, :], quiet=True))))
 
 
 @dataclass(frozen=True)
@@ -93,27 +114,30 @@ class PointMoments:
     mean: np.ndarray  # (k,)
     cov: np.ndarray  # (k, k)
     ess: float  # effective draws: n_sweeps / the largest integrated autocorrelation time
+    n_sweeps: int  # the chain's length (after burn-in)
 
 
 def moments_at(design: Design, full: np.ndarray, free: np.ndarray, n_sweeps: int,
-               burn_in: int, seed: int) -> PointMoments:
+               burn_in: int, seed: int, min_ess: float = MIN_ESS,
+               max_sweeps: int | None = None) -> PointMoments:
     """Mean, covariance and effective sample size of ``S_F`` at the full MRF vector
-    ``full`` (a pure function of its arguments: what a dask worker runs)."""
-    import logging
-
-    from emcee.autocorr import integrated_time
-
-    logging.getLogger("emcee.autocorr").setLevel(logging.ERROR)  # short chains are judged here
-    s = statistic_chain(design, design.psi(full[None])[0], free, n_sweeps, seed=seed,
-                        burn_in=burn_in)
-    sd = s.std(axis=0)
-    moving = sd > 0
-    tau = 1.0
-    if moving.any():
-        z = (s[:, moving] - s[:, moving].mean(axis=0)) / sd[moving]
-        tau = max(1.0, float(np.max(integrated_time(z[:, None, :], quiet=True))))
+    ``full``: a chain of ``n_sweeps`` sweeps after ``burn_in``, doubled until it holds
+    ``min_ess`` effective draws or ``max_sweeps`` (default ``32 n_sweeps``) sweeps -- near a
+    first-order transition Swendsen-Wang's autocorrelation time runs to hundreds of sweeps.
+    A pure function of its arguments: what a dask worker runs."""
+    cap = 32 * n_sweeps if max_sweeps is None else max_sweeps
+    rng = np.random.default_rng(seed)
+    psi = design.psi(full[None])[0]
+    s, last = statistic_chain(design, psi, free, n_sweeps, seed=int(rng.integers(2**63)),
+                              burn_in=burn_in)
+    tau = _tau(s)
+    while len(s) / tau < min_ess and len(s) < cap:
+        more, last = statistic_chain(design, psi, free, min(len(s), cap - len(s)),
+                                     seed=int(rng.integers(2**63)), init=last)
+        s = np.concatenate([s, more])
+        tau = _tau(s)
     cov = np.atleast_2d(np.cov(s, rowvar=False))
-    return PointMoments(full[free].copy(), s.mean(axis=0), cov, n_sweeps / tau)
+    return PointMoments(full[free].copy(), s.mean(axis=0), cov, len(s) / tau, len(s))
 
 
 def _point_seed(seed: int, theta: np.ndarray) -> int:
@@ -156,7 +180,9 @@ class Surrogate:
     fixed : every MRF parameter's value where fixed (NaN where free)
     low, high : (d,) the design's box
     points, means, covs, ess : the design: (K, d), (K, k), (K, k, k), (K,)
-    validation_error : the largest mean error left, in posterior sds (module docstring)
+    checks : (m, 2 d + 1) each validation check's region (low corner, high corner: an
+        interval of the design in one dimension, a point in several) and the interpolated
+        mean's error there, in posterior sds (module docstring)
     node_shape, n_states, model : what the surrogate was built for
     """
 
@@ -168,7 +194,7 @@ class Surrogate:
     means: np.ndarray
     covs: np.ndarray
     ess: np.ndarray
-    validation_error: float
+    checks: np.ndarray
     node_shape: tuple[int, ...]
     n_states: int
     model: str
@@ -183,6 +209,20 @@ class Surrogate:
     @property
     def n_design(self) -> int:
         return int(self.points.shape[0])
+
+    @property
+    def validation_error(self) -> float:
+        """The largest mean error of every check, in posterior sds."""
+        return float(self.checks[:, -1].max()) if self.checks.size else math.nan
+
+    def error_within(self, low: Any, high: Any) -> float:
+        """The largest error of the checks whose region meets the box ``[low, high]`` (the
+        posterior's range: an error far from the posterior does not move it); every
+        check's where none does."""
+        d = len(self.names)
+        lo, hi, z = self.checks[:, :d], self.checks[:, d:2 * d], self.checks[:, -1]
+        near = np.all((hi >= np.asarray(low)) & (lo <= np.asarray(high)), axis=1)
+        return float(z[near].max()) if near.any() else self.validation_error
 
     def moments(self, theta: Any) -> tuple[np.ndarray, np.ndarray]:
         """Interpolated ``(μ (N, k), lower Cholesky factor of Σ (N, k, k))`` at θ (N, d)."""
@@ -258,7 +298,7 @@ def _errors(surrogate: Surrogate, checks: list[PointMoments]) -> np.ndarray:
 
 
 def build_surrogate(target: Any, *, seed: int, client: Any = None, n_design: int = 17,
-                    max_design: int = 65, n_sweeps: int = 2000, burn_in: int = 200,
+                    max_design: int = 65, n_sweeps: int = 1000, burn_in: int = 200,
                     n_validation: int = 16, tol: float = SURROGATE_TOL) -> Surrogate:
     """The surrogate of a hidden target's MRF over its free MRF parameters' bounds.
 
@@ -270,7 +310,8 @@ def build_surrogate(target: Any, *, seed: int, client: Any = None, n_design: int
     seed : every simulation derives from it (and from each design point's value).
     client : a ``dask.distributed.Client``, optional: one task per design point.
     n_design, max_design : points of the first design, and the most after refinement.
-    n_sweeps, burn_in : sweeps of the simulator per design point, after ``burn_in``.
+    n_sweeps, burn_in : sweeps of the simulator per design point, after ``burn_in``,
+        lengthened up to 32-fold until the point holds :data:`MIN_ESS` effective draws.
     n_validation : check points in several dimensions (one dimension: every midpoint).
     tol : the mean error, in posterior sds, above which an interval is split.
     """
@@ -297,19 +338,20 @@ def build_surrogate(target: Any, *, seed: int, client: Any = None, n_design: int
                            box[:, 0], box[:, 1])
     done = _simulate_points(*sim, points, n_sweeps, burn_in, seed, client)
 
-    def make(pm: list[PointMoments], error: float) -> Surrogate:
+    def make(pm: list[PointMoments], checks: np.ndarray) -> Surrogate:
         return Surrogate(tuple(target.all_names[i] for i in free),
                          np.where(target.free[: target.n_mrf], np.nan, fixed_full),
                          box[:, 0].copy(), box[:, 1].copy(), np.array([p.theta for p in pm]),
                          np.array([p.mean for p in pm]), np.array([p.cov for p in pm]),
-                         np.array([p.ess for p in pm]), error, target.node_shape, target.q,
+                         np.array([p.ess for p in pm]), checks, target.node_shape, target.q,
                          target.model.mrf.name)
 
     if free.size > 1:
         checks_at = qmc.scale(qmc.Sobol(free.size, seed=seed + 1).random(n_validation),
                               box[:, 0], box[:, 1])
         checks = _simulate_points(*sim, checks_at, n_sweeps, burn_in, seed, client)
-        return make(done, float(_errors(make(done, math.nan), checks).max()))
+        errors = _errors(make(done, _NO_CHECKS), checks)
+        return make(done, np.column_stack([checks_at, checks_at, errors]))
     return _refine_1d(make, sim, done, n_sweeps, burn_in, seed, client, max_design, tol)
 
 
@@ -322,7 +364,7 @@ def _refine_1d(make: Any, sim: tuple, done: list[PointMoments], n_sweeps: int, b
     while todo:
         mids = np.array([[(a + b) / 2] for a, b in todo])
         checks = _simulate_points(*sim, mids, n_sweeps, burn_in, seed, client)
-        errors = _errors(make(done, math.nan), checks)
+        errors = _errors(make(done, _NO_CHECKS), checks)
         split = []
         for (a, b), c, e in zip(todo, checks, errors, strict=True):
             worst[(a, b)] = e
@@ -331,7 +373,7 @@ def _refine_1d(make: Any, sim: tuple, done: list[PointMoments], n_sweeps: int, b
                 split += [(a, c.theta[0]), (c.theta[0], b)]
                 worst.pop((a, b))
         todo = split
-    return make(done, float(max(worst.values())))
+    return make(done, np.array([[a, b, e] for (a, b), e in sorted(worst.items())]))
 
 
 def check_surrogate(surrogate: Any, target: Any) -> None:

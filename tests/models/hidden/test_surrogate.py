@@ -104,8 +104,9 @@ def test_a_surrogate_is_checked_against_the_target_it_serves(surrogate):
 def test_statistics_chains_and_the_log_linear_check():
     t = _target()
     assert is_log_linear(t.design, t.n_mrf)
-    s = statistic_chain(t.design, np.array([0.5, 0.0, 0.0]), np.array([0]), 30, seed=0)
-    assert s.shape == (30, 1) and np.all(s >= 0) and np.all(s <= t.design.graph.n_edges)
+    s, last = statistic_chain(t.design, np.array([0.5, 0.0, 0.0]), np.array([0]), 30, seed=0)
+    assert last.shape == (t.n_nodes,) and s.shape == (30, 1)
+    assert np.all(s >= 0) and np.all(s <= t.design.graph.n_edges)
 
     def pair(th):  # a coupling through its square: not log-linear
         return (th[:, 0] ** 2)[:, None, None] * np.eye(2)[None]
@@ -128,3 +129,25 @@ def test_no_free_mrf_parameter_or_a_feature_map_is_refused_before_any_work():
         build_surrogate(fixed_all, seed=0)
     with pytest.raises(ValueError, match="n_design"):
         build_surrogate(t, seed=0, n_design=1)
+
+
+def test_a_design_point_is_simulated_until_it_holds_enough_effective_draws():
+    from mrfpe.models.hidden.surrogate import moments_at
+
+    t = _target()
+    full, free = np.array([1.0, 0.0, 0.0]), np.array([0])
+    short = moments_at(t.design, full, free, 50, 0, seed=0, min_ess=1.0)
+    capped = moments_at(t.design, full, free, 50, 0, seed=0, min_ess=1e9, max_sweeps=400)
+    enough = moments_at(t.design, full, free, 50, 0, seed=0, min_ess=100.0)
+    assert short.n_sweeps == 50 and capped.n_sweeps == 400
+    assert enough.ess >= 100.0 and 50 < enough.n_sweeps <= 1600
+
+
+def test_the_error_that_counts_is_the_one_in_the_posterior_range(surrogate):
+    import dataclasses
+
+    s = dataclasses.replace(surrogate, checks=np.array([[0.0, 1.0, 0.05], [1.0, 2.0, 0.5]]))
+    assert s.validation_error == 0.5
+    assert s.error_within([0.2], [0.8]) == 0.05
+    assert s.error_within([0.5], [1.5]) == 0.5
+    assert s.error_within([2.5], [2.6]) == 0.5  # no check there: every check's

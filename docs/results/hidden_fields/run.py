@@ -64,7 +64,18 @@ def seed_of(name: str) -> int:
     return zlib.crc32(f"{STUDY}/{name}".encode())
 
 
+def _commit() -> str:
+    import subprocess
+
+    try:
+        return subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"],
+                              capture_output=True, text=True, timeout=10).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return ""
+
+
 def write(name: str, record: dict) -> None:
+    record = {**record, "mrfpe": mrfpe.__version__, "commit": _commit()}
     TRIALS.mkdir(parents=True, exist_ok=True)
     tmp = TRIALS / f".{name}.json.tmp"
     tmp.write_text(json.dumps(record, indent=1, default=float))

@@ -37,7 +37,8 @@ import numpy as np
 
 from mrfpe.models.design import Design
 from mrfpe.models.estimators import ConditionalTarget, LikelihoodTarget
-from mrfpe.models.hidden.surrogate import SURROGATE_TOL, Surrogate, build_surrogate
+from mrfpe.models.hidden.surrogate import SURROGATE_TOL, Surrogate
+from mrfpe.models.hidden.surrogate_build import build_surrogate
 from mrfpe.models.hidden.target import HiddenTarget
 from mrfpe.models.mixing import autocorrelation_time
 from mrfpe.samplers.hidden_steps import walk_block

@@ -30,7 +30,8 @@ from __future__ import annotations
 
 from mrfpe.models.hidden.model import HiddenModel, hidden
 from mrfpe.models.hidden.point import icm, mean_field_em
-from mrfpe.models.hidden.surrogate import Surrogate, build_surrogate
+from mrfpe.models.hidden.surrogate import Surrogate
+from mrfpe.models.hidden.surrogate_build import build_surrogate
 from mrfpe.models.hidden.target import METHODS, HiddenTarget
 
 __all__ = ["METHODS", "HiddenModel", "HiddenTarget", "Surrogate", "build_surrogate", "hidden",

@@ -118,7 +118,9 @@ class KeptStates:
         if self.log_weight is not None:
             lw = self.log_weight[: self._k].reshape(-1)
             e = max(e * ess(lw) / lw.size, 1.0)
-        return float(e)
+        # antithetic short chains give an autocorrelation ESS above the draw count; the
+        # trace reports at most the draws it has (the posterior's check holds it to that)
+        return float(min(e, x.shape[0] * x.shape[1]))
 
     def flat(self) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         """``(theta (S, d), log_target (S,), log_weight (S,) or None)``, S = K·C, step-major."""

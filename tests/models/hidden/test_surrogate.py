@@ -11,7 +11,8 @@ import pytest
 
 from mrfpe import models
 from mrfpe.models.hidden import Surrogate, build_surrogate
-from mrfpe.models.hidden.surrogate import SURROGATE_TOL, is_log_linear, statistic_chain
+from mrfpe.models.hidden.surrogate import SURROGATE_TOL, is_log_linear
+from mrfpe.models.hidden.surrogate_build import statistic_chain
 from tests.models.hidden.transfer import log_z_product
 
 H, W, Q = 4, 12, 3
@@ -132,7 +133,7 @@ def test_no_free_mrf_parameter_or_a_feature_map_is_refused_before_any_work():
 
 
 def test_a_design_point_is_simulated_until_it_holds_enough_effective_draws():
-    from mrfpe.models.hidden.surrogate import moments_at
+    from mrfpe.models.hidden.surrogate_build import moments_at
 
     t = _target()
     full, free = np.array([1.0, 0.0, 0.0]), np.array([0])
@@ -151,3 +152,20 @@ def test_the_error_that_counts_is_the_one_in_the_posterior_range(surrogate):
     assert s.error_within([0.2], [0.8]) == 0.05
     assert s.error_within([0.5], [1.5]) == 0.5
     assert s.error_within([2.5], [2.6]) == 0.5  # no check there: every check's
+
+
+def test_a_surrogate_saves_loads_and_pickles_to_the_same_numbers(surrogate, tmp_path):
+    import pickle
+
+    path = tmp_path / "potts3_4x12.npz"
+    surrogate.save(path)
+    back = Surrogate.load(path)
+    beta = np.linspace(-0.4, 1.9, 7)[:, None]
+    for other in (back, pickle.loads(pickle.dumps(surrogate))):
+        assert other.names == surrogate.names and other.node_shape == surrogate.node_shape
+        assert np.array_equal(other.log_lik(np.array([30.0]), beta),
+                              surrogate.log_lik(np.array([30.0]), beta))
+    _target(surrogate=back)  # still checked against the target it serves
+    (tmp_path / "junk.npz").write_bytes(b"not a zip")
+    with pytest.raises(ValueError, match=r"junk\.npz: not a surrogate"):
+        Surrogate.load(tmp_path / "junk.npz")

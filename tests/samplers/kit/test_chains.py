@@ -46,3 +46,19 @@ def test_validates_target_and_seed(target, seed, match):
 def test_memory_check_counts_the_kept_states():
     with pytest.raises(ValueError, match="sampler test"):
         start_chains(CorrelatedGaussian(), 0, **{**SETTINGS, "n_steps": 10**13, "burn_in": 0})
+
+
+def test_short_antithetic_chains_never_report_more_ess_than_draws():
+    import warnings
+
+    import mrfpe
+    from mrfpe import models
+
+    m = models.ising()
+    x = m.simulate([0.3, 0.0], shape=(16, 16), seed=0)
+    for seed in range(20):  # 13 of these 20 failed the posterior's check before the cap
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", mrfpe.PosteriorWarning)
+            post = mrfpe.sample("mh", m.target("pl", x), seed=seed, n_steps=20, burn_in=10)
+        trace = post["ess"].values
+        assert np.nanmax(trace) <= post.sizes["sample"]

@@ -21,7 +21,11 @@ parameter (the MRF's, then the emission's; fixed ones at their values). One step
 
 Each block leaves its full conditional (or, for the MRF's parameters, the pseudo
 conditional) invariant; their cycle is the sampler. The random walks are the kit's
-(:class:`~mrfpe.samplers.kit.AdaptiveRandomWalk`), adapted during burn-in only.
+(:class:`~mrfpe.samplers.kit.AdaptiveRandomWalk`), adapted during burn-in only. The
+labels' conditional rows (:meth:`LabelField.conditional_rows
+<mrfpe.models.hidden.field.LabelField.conditional_rows>`) are built once per step, after
+the labels move, for both the pseudolikelihood of step 3 and the joint log density
+(:func:`joint_log_target`, whose data term reads only the labels' states).
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from mrfpe.models.design import ConditionalRows
 from mrfpe.models.hidden.point import PointEstimate
 from mrfpe.models.hidden.target import HiddenTarget
 from mrfpe.samplers.kit import AdaptiveRandomWalk, metropolis_accept
@@ -54,13 +59,16 @@ class Walks(NamedTuple):
     emission: AdaptiveRandomWalk | None
 
 
-def joint_log_target(target: HiddenTarget, x: np.ndarray, params: np.ndarray) -> float:
+def joint_log_target(target: HiddenTarget, x: np.ndarray, params: np.ndarray,
+                     rows: ConditionalRows | None = None) -> float:
     """``log PL(x | θ) + sum_i log p(y_i | x_i, φ) + log prior(φ)`` of one chain: the log
-    density the sampler's draws are ranked by (its MAP trace), up to a constant."""
+    density the sampler's draws are ranked by (its MAP trace), up to a constant. ``rows``:
+    the labels' conditional rows, if already built (:meth:`LabelField.conditional_rows
+    <mrfpe.models.hidden.field.LabelField.conditional_rows>`)."""
     mrf, em = target.split(params)
-    ll = target.emission.log_lik(em)[0]
-    data = ll[np.arange(x.size), x][target.observed].sum()
-    return float(target.log_pl(x, mrf)[0] + data + target.emission.log_prior(em)[0])
+    rows = target.field.conditional_rows(x) if rows is None else rows
+    return float(target.log_pl_rows(rows, mrf)[0] + target.emission.log_lik_at(em, x)[0]
+                 + target.emission.log_prior(em)[0])
 
 
 def start_state(target: HiddenTarget, point: PointEstimate, n_chains: int,
@@ -169,26 +177,11 @@ def _emission_block(target: HiddenTarget, state: HiddenState, walk: AdaptiveRand
 
     def log_density(c: int, trial: np.ndarray) -> np.ndarray:
         em = trial[:, n_mrf:]
-        ll = target.emission.log_lik(em)
-        x = state.labels[c]
-        data = ll[:, np.arange(x.size), x][:, target.observed].sum(axis=1)
-        return data + target.emission.log_prior(em)
+        return target.emission.log_lik_at(em, state.labels[c]) + target.emission.log_prior(em)
 
     idx = n_mrf + np.flatnonzero(free)
     return float(np.mean([walk_block(walk, idx, state.params, log_density, rng)
                           for _ in range(theta_steps)]))
-
-
-def _log_targets(target: HiddenTarget, state: HiddenState) -> np.ndarray:
-    """:func:`joint_log_target` of every chain (its pseudolikelihood in one compiled pass)."""
-    em = target.split(state.params)[1]
-    ll = target.emission.log_lik(em)  # (C, n, q)
-    out = target.emission.log_prior(em)
-    for c, tables in enumerate(_tables(target, state.params)):
-        x = state.labels[c]
-        data = ll[c, np.arange(x.size), x][target.observed].sum()
-        out[c] += data + target.field.log_pl(x, tables)
-    return out
 
 
 def hidden_step(target: HiddenTarget, state: HiddenState, walks: Walks,
@@ -202,7 +195,9 @@ def hidden_step(target: HiddenTarget, state: HiddenState, walks: Walks,
     """
     _label_sweeps(target, state, rng, acc, swendsen_wang)
     em_acc = _emission_block(target, state, walks.emission, rng, theta_steps)
-    mrf_acc = theta_update.step(state, walks.mrf, rng, theta_steps)
-    lt = _log_targets(target, state)
+    rows = [target.field.conditional_rows(x) for x in state.labels]  # for PL, built once
+    mrf_acc = theta_update.step(state, walks.mrf, rng, theta_steps, rows)
+    lt = np.array([joint_log_target(target, x, p, r)
+                   for x, p, r in zip(state.labels, state.params, rows, strict=True)])
     return HiddenState(state.labels, state.params, lt), {"mrf_acceptance": mrf_acc,
                                                          "emission_acceptance": em_acc}

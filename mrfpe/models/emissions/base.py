@@ -111,7 +111,7 @@ class BoundEmission:
 
     # -- to be provided ---------------------------------------------------------------------
     def _log_lik_observed(self, params: np.ndarray) -> np.ndarray:  # pragma: no cover
-        """``(N, n_observed, q)`` log-densities at the observed nodes."""
+        """``(N, n_observed, q)`` log-densities at the observed nodes (a new array)."""
         raise NotImplementedError
 
     def log_prior(self, params: Any) -> np.ndarray:  # pragma: no cover - abstract
@@ -141,10 +141,19 @@ class BoundEmission:
         """``(N, n, q)``: ``log p(y_i | x_i = a, φ)`` per parameter vector, node and state;
         0 at missing nodes (integrated over: a density integrates to 1)."""
         params = self.as_params(params)
+        if self.observed.all():  # nothing to scatter (_log_lik_observed gives a new array)
+            return np.ascontiguousarray(self._log_lik_observed(params), dtype=np.float64)
         out = np.zeros((params.shape[0], self.y.size, self.q))
         if self.observed.any():
             out[:, self.observed] = self._log_lik_observed(params)
         return out
+
+    def log_lik_at(self, params: Any, x: np.ndarray) -> np.ndarray:
+        """``(N,)``: ``sum_i log p(y_i | x_i, φ)`` over the observed nodes at the labels
+        ``x`` (n,), per parameter vector (subclasses may skip the states not taken)."""
+        x = np.asarray(x, dtype=np.int64)
+        ll = self.log_lik(params)
+        return ll[:, np.arange(x.size), x][:, self.observed].sum(axis=1)
 
     def as_params(self, params: Any) -> np.ndarray:
         """``params`` as a float64 ``(N, d)`` batch (one vector gives ``(1, d)``)."""

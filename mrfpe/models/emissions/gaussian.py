@@ -22,6 +22,7 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
+from numba import njit
 
 from mrfpe.models.emissions.base import (
     BoundEmission,
@@ -106,6 +107,32 @@ def _split(p: np.ndarray, q: int, shared: bool) -> tuple[np.ndarray, np.ndarray]
     return p[:, :q], sd
 
 
+@njit(cache=True)
+def _normal_log_density(yo, mean, sd, out) -> None:
+    """``out[k, i, a] = log N(yo[i]; mean[k, a], sd[k, a]^2)``, in one pass."""
+    N, q = mean.shape
+    for k in range(N):
+        r, c = 1.0 / sd[k], np.log(sd[k]) + _HALF_LOG_2PI
+        for i in range(yo.size):
+            for a in range(q):
+                z = (yo[i] - mean[k, a]) * r[a]
+                out[k, i, a] = -0.5 * z * z - c[a]
+
+
+@njit(cache=True)
+def _normal_log_density_at(yo, xo, mean, sd) -> np.ndarray:
+    """``sum_i log N(yo[i]; mean[k, xo[i]], sd[k, xo[i]]^2)`` (N,), in one pass."""
+    N = mean.shape[0]
+    out = np.zeros(N)
+    for k in range(N):
+        r, c = 1.0 / sd[k], np.log(sd[k]) + _HALF_LOG_2PI
+        for i in range(yo.size):
+            a = np.uint32(xo[i])  # a state: no negative-index wraparound
+            z = (yo[i] - mean[k, a]) * r[a]
+            out[k] -= 0.5 * z * z + c[a]
+    return out
+
+
 class BoundGaussian(BoundEmission):
     """The Gaussian emission on one data set (see :class:`Gaussian`)."""
 
@@ -124,8 +151,15 @@ class BoundGaussian(BoundEmission):
 
     def _log_lik_observed(self, params: np.ndarray) -> np.ndarray:
         mean, sd = _split(params, self.q, self.shared)
-        z = (self.yo[None, :, None] - mean[:, None, :]) / sd[:, None, :]
-        return -0.5 * z * z - np.log(sd)[:, None, :] - _HALF_LOG_2PI
+        out = np.empty((params.shape[0], self.yo.size, self.q))
+        _normal_log_density(self.yo, mean, sd, out)
+        return out
+
+    def log_lik_at(self, params: Any, x: np.ndarray) -> np.ndarray:
+        mean, sd = _split(self.as_params(params), self.q, self.shared)
+        xo = np.asarray(x, dtype=np.int64)
+        xo = xo if self.yo.size == xo.size else xo[self.observed]
+        return _normal_log_density_at(self.yo, xo, mean, sd)
 
     def log_prior(self, params: Any) -> np.ndarray:
         p = self.as_params(params)

@@ -100,8 +100,8 @@ class BoundGeneral(BoundEmission):
 
     def _log_lik_observed(self, params: np.ndarray) -> np.ndarray:
         n = int(self.observed.sum())
-        out = np.asarray(self.emission.log_density(self.y[self.observed], params),
-                         dtype=np.float64)
+        out = np.array(self.emission.log_density(self.y[self.observed], params),
+                       dtype=np.float64)  # a copy: log_lik may hand it out
         if out.shape != (params.shape[0], n, self.q):
             raise ValueError(f"the emission {self.emission.name!r}'s log_density must return "
                              f"(N, n, q) = ({params.shape[0]}, {n}, {self.q}) for {n} "

@@ -338,12 +338,15 @@ class MRF(Model):
     # -- simulation ------------------------------------------------------------------------------
     def simulate(self, theta: Any, shape: Any = None, n: int = 1, *, seed: int | None = None,
                  covariates: Mapping[str, Any] | None = None, method: str = "auto",
-                 n_sweeps: int = 200, thin: int = 10, init: Any = "random") -> np.ndarray:
+                 n_sweeps: int = 200, thin: int = 10, init: Any = "random",
+                 kernel: str = "auto") -> np.ndarray:
         """Draw ``n`` configurations at ``theta`` (see :func:`mrfpe.models.simulate.simulate`).
 
         Returns ``(n, H, W)`` on a lattice, ``(n, n_nodes)`` on a fixed graph; a ``(B, d)``
         theta runs one chain per row (:func:`mrfpe.models.simulate_batch.simulate_batch`)
-        and returns ``(B, n, H, W)`` or ``(B, n, n_nodes)``.
+        and returns ``(B, n, H, W)`` or ``(B, n, n_nodes)``. ``kernel`` (rows only): as
+        ``simulate_batch``'s -- many Gibbs chains of a binary lattice model run on the
+        multi-spin kernel (same distribution, other draws) unless it is ``"scalar"``.
         """
         from mrfpe.models.simulate import check_simulation_size, simulate
         from mrfpe.models.simulate_batch import check_batch_size, check_theta_rows, simulate_batch
@@ -358,7 +361,8 @@ class MRF(Model):
         design, names, _ = self.compile(shape, covariates)
         opts = {"seed": seed, "method": method, "n_sweeps": n_sweeps, "thin": thin, "init": init}
         if rows:
-            draws = simulate_batch(design, design.psi(check_theta_rows(theta, names)), n, **opts)
+            draws = simulate_batch(design, design.psi(check_theta_rows(theta, names)), n,
+                                   kernel=kernel, **opts)
         else:
             draws = simulate(design, design.psi(_one_theta(theta, names)[None])[0], n, **opts)
         g = design.graph

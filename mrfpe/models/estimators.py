@@ -12,7 +12,8 @@
   from :mod:`mrfpe.models.exact`.
 * :class:`LikelihoodTarget` -- the unnormalised log-likelihood ``S(x) . psi``
   with the model's simulator: the input of doubly-intractable samplers
-  (exchange algorithm, Murray, Ghahramani & MacKay 2006).
+  (exchange algorithm, Murray, Ghahramani & MacKay 2006), whose auxiliary draws at
+  many parameter vectors come from one compiled call (:meth:`LikelihoodTarget.simulate_aux`).
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ from mrfpe.models.design import (
     Design,
     allowed_dot,
     softmax_rows_log_prob,
+    split_forbidden,
 )
 from mrfpe.models.graph import Graph
 from mrfpe.models.options import largest_block, node_blocks
@@ -201,6 +203,44 @@ class LikelihoodTarget(ModelTarget):
         their statistics once, then one product per call, ``-inf`` for a forbidden one."""
         S = self.sufficient_statistics(y)
         return lambda theta: allowed_dot(self.design.psi(theta), S)
+
+    def simulate_aux(self, theta: Any, *, seed: Any = None, n_sweeps: int | None = None,
+                     kernel: str = "auto") -> np.ndarray:
+        """Auxiliary draws at each row of ``theta`` (B, d): (B, M, n_nodes).
+
+        One chain per row and observed configuration, started at that configuration and
+        run ``n_sweeps`` sweeps (default the target's) of the target's sampler: draw
+        ``[b, m]`` is distributed as ``simulate(theta[b], init="data")[m]``, the
+        auxiliary draw of the exchange algorithm (Murray, Ghahramani & MacKay 2006) from
+        the data (Caimo & Friel 2011). All ``B x M`` chains run in one compiled call
+        (:func:`~mrfpe.models.simulate_batch.simulate_batch`; ``kernel`` as there: the
+        multi-spin kernel for many chains of a binary lattice model, same distribution,
+        other random numbers).
+        """
+        from mrfpe.models.simulate_batch import simulate_batch
+
+        th = as_theta_batch(theta, self.ndim)
+        B, M, n = th.shape[0], self.n_observations, self.design.graph.n_nodes
+        psi = np.repeat(self.design.psi(th), M, axis=0)  # row b * M + m: chain (b, m)
+        draws = simulate_batch(self.design, psi, 1, seed=check_seed(seed), method=self.sampler,
+                               n_sweeps=self.n_sweeps if n_sweeps is None else n_sweeps,
+                               init=np.tile(self.x, (B, 1)), kernel=kernel)
+        return draws.reshape(B, M, n)
+
+    def unnormalised_rows(self, theta: Any, draws: Any) -> np.ndarray:
+        """``sum_m S(draws[b, m])·psi(theta[k, b])`` (K, B) for ``theta`` (K, B, d) and
+        ``draws`` (B, M, n_nodes): each set of draws at K parameter vectors, the draws'
+        statistics computed once; ``-inf`` where a draw holds a forbidden state or pair."""
+        th = np.asarray(theta, dtype=np.float64)
+        (K, B), P = th.shape[:2], self.design.n_features
+        y = np.asarray(draws)
+        s = self.design.statistics(y.reshape(-1, y.shape[-1])).reshape(B, -1, P).sum(axis=1)
+        psi = self.design.psi(as_theta_batch(th.reshape(K * B, -1), self.ndim))
+        fin, forbid = split_forbidden(psi.reshape(K, B, P))
+        out = np.einsum("kbp,bp->kb", fin, s)
+        if forbid is not None:
+            out[np.einsum("kbp,bp->kb", forbid, (s != 0).astype(np.float64)) > 0] = -np.inf
+        return out
 
     def simulate(self, theta: Any, n: int | None = None, *, seed: Any = None,
                  init: Any = "random", n_sweeps: int | None = None,

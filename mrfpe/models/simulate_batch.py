@@ -16,11 +16,26 @@ its own start: the uniform of node ``i`` at sweep ``s`` is output ``s * n_nodes 
 the chain's counter-based SplitMix64 stream (Steele, Lea & Flood 2014), so the draws
 depend neither on the number of threads, nor on the other chains of the batch, nor on
 which of the two parallel layouts ran.
+
+Multi-spin kernel. Gibbs chains of a binary 4- or 8-neighbour lattice model
+(:func:`mrfpe.models.multispin.applies`) run, from :data:`MULTISPIN_MIN_ROWS` of them on,
+as replicas of the multi-spin coded heat-bath kernel (Jacobs & Rebbi 1981; 64 replicas a
+machine word, each at its own parameters, :mod:`mrfpe.models.multispin`). Its draws have
+the distribution of the scalar kernel's -- the same checkerboard heat-bath chain from
+the same start -- but other random numbers, so they are *not* identical to the
+single-chain calls: ``kernel="scalar"`` keeps the identity above, ``kernel="multispin"``
+asks for the multi-spin kernel at any number of rows. Measured at 64² (Ising, coupling
+0.3, one call per batch, benchmarks/RESULTS.md): one multi-spin sweep costs about as much
+for 1 replica as for 64, so it matches the scalar kernel's time at about 8 chains and is
+2x faster at 16, 13x at 64; hence the threshold 16. ``method="auto"`` keeps choosing
+Swendsen-Wang where it applies (ferromagnetic Potts), as ``simulate`` does; only the
+chains it resolves to Gibbs (and ``method="gibbs"``) use the multi-spin kernel.
 """
 
 from __future__ import annotations
 
 import os
+import time
 from pathlib import Path
 from typing import Any
 
@@ -31,6 +46,7 @@ from numba import njit, prange
 from mrfpe.budget import check_memory
 from mrfpe.models.design import Design, check_configurations
 from mrfpe.models.graph import LatticeSpec, _check_shape
+from mrfpe.models.multispin import lattice_parameters, multispin_gibbs, why_not
 from mrfpe.models.simulate import (
     _BLOCK,
     METHODS,
@@ -45,8 +61,12 @@ from mrfpe.models.simulate import (
 from mrfpe.threads import limit_threads, thread_budget
 from mrfpe.validation import check_positive_int, check_seed
 
-__all__ = ["chain_seeds", "check_batch_size", "check_theta_rows", "simulate_batch",
-           "spare_cores"]
+__all__ = ["KERNELS", "MULTISPIN_MIN_ROWS", "chain_seeds", "check_batch_size",
+           "check_theta_rows", "simulate_batch", "spare_cores"]
+
+KERNELS = ("auto", "scalar", "multispin")
+#: Gibbs chains from which ``kernel="auto"`` runs the multi-spin kernel (module docstring).
+MULTISPIN_MIN_ROWS = 16
 
 
 def chain_seeds(seed: int | None, n_chains: int) -> np.ndarray:
@@ -104,14 +124,29 @@ def _sw_chains(X, node, edges, etab, p_bond, keys, slot, out):
         _swendsen_wang(X[b], node[b], edges, etab, p_bond[b], keys[b], slot, out[b])
 
 
-def spare_cores() -> int:
-    """Cores of this process's affinity not taken by other processes' runnable threads now.
+#: Seconds a reading of :func:`spare_cores` is reused: reading ``/proc`` costs about a
+#: millisecond, as much as a small batch's sweeps (the exchange algorithm calls once a step).
+SPARE_CORES_TTL = 0.25
+_spare_reading = [-np.inf, 1]  # (monotonic time, cores)
 
-    The block layout meets a barrier per colour class: a thread that shares its core with
-    another process arrives late at each, and two threads on one free core ran 2-3x slower
-    than one. Runnable threads of the whole system (``/proc/loadavg``) less this process's
-    own (``/proc/self/task``); all cores where ``/proc`` is missing.
+
+def spare_cores() -> int:
+    """Cores of this process's affinity not taken by other processes' runnable threads now
+    (a reading at most :data:`SPARE_CORES_TTL` seconds old).
+
+    The block layout meets a barrier per colour class, and every parallel call one at its
+    end: a thread that shares its core with another process arrives late, and two threads
+    on one free core ran 2-3x slower than one. Runnable threads of the whole system
+    (``/proc/loadavg``) less this process's own (``/proc/self/task``); all cores where
+    ``/proc`` is missing.
     """
+    now = time.monotonic()
+    if now - _spare_reading[0] > SPARE_CORES_TTL:
+        _spare_reading[:] = [now, _read_spare_cores()]
+    return int(_spare_reading[1])
+
+
+def _read_spare_cores() -> int:
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     try:
         running = int(Path("/proc/loadavg").read_text().split()[3].split("/")[0])
@@ -223,7 +258,7 @@ def _schedule(n: int, n_sweeps: int, thin: int) -> np.ndarray:
 
 def simulate_batch(design: Design, psi_rows: np.ndarray, n: int = 1, *,
                    seed: int | None = None, method: str = "auto", n_sweeps: int = 200,
-                   thin: int = 10, init: Any = "random") -> np.ndarray:
+                   thin: int = 10, init: Any = "random", kernel: str = "auto") -> np.ndarray:
     """Draw ``n`` configurations from each of ``B`` chains, chain ``b`` at ``psi_rows[b]``.
 
     Parameters
@@ -237,7 +272,8 @@ def simulate_batch(design: Design, psi_rows: np.ndarray, n: int = 1, *,
     seed : int or None
         Chain ``b`` uses the seed ``chain_seeds(seed, B)[b]``: its draws equal
         :func:`~mrfpe.models.simulate.simulate` at ``psi_rows[b]`` with that seed (module
-        docstring), whatever the number of threads and the rest of the batch.
+        docstring), whatever the number of threads and the rest of the batch -- unless
+        the multi-spin kernel runs it (``kernel``).
     method : "auto", "gibbs" or "swendsen_wang"
         As in ``simulate``, per chain: Gibbs over colour classes (Geman & Geman 1984),
         Swendsen-Wang (Swendsen & Wang 1987) where the chain's tables allow it.
@@ -246,6 +282,13 @@ def simulate_batch(design: Design, psi_rows: np.ndarray, n: int = 1, *,
     init : "random", one configuration, or ``B`` configurations
         ``(n_nodes,)`` or the lattice's shape, shared; ``(B, n_nodes)`` or ``(B, H, W)``,
         one per chain (say the data, or each chain's own labels).
+    kernel : "auto", "scalar" or "multispin"
+        Which kernel runs the Gibbs chains: ``"auto"`` the multi-spin coded one (Jacobs &
+        Rebbi 1981) for at least :data:`MULTISPIN_MIN_ROWS` chains of a binary lattice
+        model with finite parameters, else the scalar one; ``"scalar"`` always the scalar
+        one (draws identical to single-chain calls); ``"multispin"`` always the multi-spin
+        one (a ValueError if it cannot run the design). Equal in distribution, not in the
+        draws (module docstring).
 
     Returns
     -------
@@ -257,6 +300,8 @@ def simulate_batch(design: Design, psi_rows: np.ndarray, n: int = 1, *,
     thin = check_positive_int("thin", thin)
     if not isinstance(method, str) or method not in METHODS:
         raise ValueError(f"method must be one of {', '.join(METHODS)}; got {method!r}")
+    if not isinstance(kernel, str) or kernel not in KERNELS:
+        raise ValueError(f"kernel must be one of {', '.join(KERNELS)}; got {kernel!r}")
     psi = _check_psi_rows(design, psi_rows)
     B, g, q = psi.shape[0], design.graph, design.q
     tables = design.node.shape[0] * q + design.pair.shape[0] * q * q  # node, pair, exp
@@ -274,7 +319,9 @@ def simulate_batch(design: Design, psi_rows: np.ndarray, n: int = 1, *,
     out = np.empty((B, n, g.n_nodes), dtype=np.int64)
     out[:, 0] = X  # kept if n_sweeps == 0
     gibbs = np.array([f is None for f in forms])
-    if gibbs.any():
+    if _use_multispin(design, psi[gibbs], kernel):
+        _run_multispin(design, np.flatnonzero(gibbs), psi, X, keys, n_sweeps, thin, out)
+    elif gibbs.any():
         _run_gibbs(design, np.flatnonzero(gibbs), X, node, pair, etab, keys, slot, out)
     if not gibbs.all():
         _run_sw(design, np.flatnonzero(~gibbs), X, node, forms, etab, keys, slot, out)
@@ -297,12 +344,37 @@ def _run_gibbs(design: Design, rows: np.ndarray, X: np.ndarray, node: np.ndarray
     common = (indptr, nbr, etab[eidx].astype(np.uint32), keys[rows], slot, outs)
     threads = numba.get_num_threads()
     with numba.parallel_chunksize(1):  # dynamic: a descheduled thread holds one piece
-        if B >= threads:
-            _gibbs_chains(Xs, order, *tables, *common)
+        if B >= threads:  # a thread sharing its core with another process holds all back
+            with limit_threads(spare_cores()):
+                _gibbs_chains(Xs, order, *tables, *common)
         else:  # threads from ~1.6e6 site-states a sweep (as simulate), on idle cores only
             with limit_threads(spare_cores()), thread_budget(B * g.n_nodes * q // 4):
                 _gibbs_blocks(Xs, order, cptr, *tables, *common)
     out[rows] = outs
+
+
+def _use_multispin(design: Design, psi: np.ndarray, kernel: str) -> bool:
+    """Whether the Gibbs chains at ``psi`` run on the multi-spin kernel (``kernel``)."""
+    if kernel == "scalar" or (kernel == "auto" and psi.shape[0] < MULTISPIN_MIN_ROWS):
+        return False  # before the lattice check: it rebuilds the graph
+    reason = why_not(design) or (None if np.isfinite(psi).all() else
+                                 "its parameters forbid states (-inf)")
+    if kernel == "multispin" and reason is not None:
+        raise ValueError(f"kernel='multispin' cannot run this design: {reason}")
+    return reason is None and psi.shape[0] > 0 and (kernel == "multispin"
+                                                    or psi.shape[0] >= MULTISPIN_MIN_ROWS)
+
+
+def _run_multispin(design: Design, rows: np.ndarray, psi: np.ndarray, X: np.ndarray,
+                   keys: np.ndarray, n_sweeps: int, thin: int, out: np.ndarray) -> None:
+    """Gibbs chains ``rows`` as replicas of the multi-spin kernel, from their starts ``X``
+    (drawn as the scalar route draws them); its key derives from the first chain's."""
+    H, W = design.graph.shape
+    draws = multispin_gibbs(**lattice_parameters(design, psi[rows]).arguments(),
+                            n_sweeps=n_sweeps, thin=thin, n=out.shape[1],
+                            seed=int(keys[rows[0]] >> np.uint64(1)),
+                            init=X[rows].reshape(rows.size, H, W))
+    out[rows] = draws.reshape(rows.size, out.shape[1], H * W)
 
 
 def _run_sw(design: Design, rows: np.ndarray, X: np.ndarray, node: np.ndarray, forms: list,
@@ -322,7 +394,10 @@ def _run_sw(design: Design, rows: np.ndarray, X: np.ndarray, node: np.ndarray, f
     for members in groups.values():
         idx = np.array([b for b, _, _ in members])
         Xs, outs = X[idx].copy(), out[idx].copy()
-        with numba.parallel_chunksize(1), limit_threads(min(numba.get_num_threads(), idx.size)):
+        # on idle cores only: at 16² four chains took 12 ms on two threads, one of them
+        # shared with another process, and 2 ms on one
+        with numba.parallel_chunksize(1), limit_threads(min(numba.get_num_threads(), idx.size,
+                                                            spare_cores())):
             _sw_chains(Xs, np.stack([nd for _, nd, _ in members]), e, etab,
                        np.stack([p for _, _, p in members]), keys[idx], slot, outs)
         out[idx] = outs

@@ -21,7 +21,8 @@ from mrfpe.models.mixing import autocorrelation_time
 from mrfpe.models.pl_spread import hessian
 from mrfpe.targets.base import as_theta_batch
 
-__all__ = ["Draws", "fisher_information", "posterior_mean_shift", "simulate_draws"]
+__all__ = ["Draws", "check_score_variance", "fisher_information", "posterior_mean_shift",
+           "simulate_draws"]
 
 
 @dataclass(frozen=True)
@@ -124,19 +125,26 @@ def fisher_information(lik: Any, draws: Draws) -> np.ndarray:
     cov = np.atleast_2d(np.cov(s, rowvar=False))
     M = int(getattr(lik, "n_observations", 1))
     info = M * cov
-    names = list(lik.param_names)
-    flat = np.flatnonzero(np.diag(info) <= 1e-12 * max(1.0, np.abs(info).max()))
-    if flat.size:
-        raise ValueError(f"the Fisher information is singular at theta {draws.theta.tolist()}: "
-                         f"the score of {names[flat[0]]!r} does not vary over "
-                         f"{draws.y.shape[0]} simulations (the model is degenerate at this "
-                         f"theta, or the data cannot identify the parameter)")
-    w = np.linalg.eigvalsh(info)
-    if w[0] <= 1e-10 * w[-1]:
-        raise ValueError(f"the Fisher information is singular at theta {draws.theta.tolist()} "
-                         f"(condition number {w[-1] / max(w[0], 1e-300):.3g}): some combination "
-                         f"of {names} is not identified by the data")
+    check_score_variance(info, list(lik.param_names),
+                         f"the Fisher information at theta {draws.theta.tolist()}",
+                         f"{draws.y.shape[0]} simulations")
     return info
+
+
+def check_score_variance(matrix: np.ndarray, names: list[str], what: str, over: str) -> None:
+    """ValueError unless a score's variance ``matrix`` is non-singular: naming the
+    parameter whose score does not vary ``over`` the simulations, or the conditioning (the
+    model is degenerate there, or the data cannot identify a combination of parameters)."""
+    flat = np.flatnonzero(np.diag(matrix) <= 1e-12 * max(1.0, np.abs(matrix).max()))
+    if flat.size:
+        raise ValueError(f"{what} is singular: the score of {names[flat[0]]!r} does not vary "
+                         f"over {over} (the model is degenerate there, or the data cannot "
+                         f"identify the parameter)")
+    w = np.linalg.eigvalsh(matrix)
+    if w[0] <= 1e-10 * w[-1]:
+        raise ValueError(f"{what} is singular (condition number "
+                         f"{w[-1] / max(w[0], 1e-300):.3g}): some combination of {names} has a "
+                         f"score that does not vary over {over}")
 
 
 def log_likelihood_near(lik: Any, draws: Draws) -> Any:

@@ -46,7 +46,7 @@ from typing import Any
 import numpy as np
 from scipy.stats import norm
 
-from mrfpe.models.draws import _step, simulate_draws
+from mrfpe.models.draws import _step, check_score_variance, simulate_draws
 from mrfpe.models.pl_spread import hessian
 from mrfpe.targets.base import as_theta_batch
 from mrfpe.targets.maximise import grid_size, maximise
@@ -208,7 +208,8 @@ def godambe(target: Any, theta_hat: Any = None, *, n_draws: int = 400, seed: int
     H = H_obs if curvature == "observed" else H_exp
     _check_curvature(target, theta, H, curvature)
     J = M * np.atleast_2d(np.cov(scores, rowvar=False))
-    _check_variability(target, J, n_draws)
+    check_score_variance(J, list(target.param_names), "the variability J",
+                         f"{n_draws} simulated fields")
     _check_score_mean(target, scores, theta)
     Hinv = np.linalg.inv(H)
     cov = Hinv @ J @ Hinv
@@ -358,20 +359,6 @@ def _check_curvature(target: Any, theta: np.ndarray, H: np.ndarray, curvature: s
         raise ValueError(f"theta_hat {theta.round(6).tolist()} is no maximum of the composite "
                          f"likelihood: its {curvature} curvature -Hessian over {names} is not "
                          f"positive definite (eigenvalues {np.round(w, 6).tolist()})")
-
-
-def _check_variability(target: Any, J: np.ndarray, n_draws: int) -> None:
-    names = list(target.param_names)
-    flat = np.flatnonzero(np.diag(J) <= 1e-12 * max(1.0, np.abs(J).max()))
-    if flat.size:
-        raise ValueError(f"the variability J is singular: the score of {names[flat[0]]!r} "
-                         f"does not vary over {n_draws} simulated fields (the model is "
-                         f"degenerate at theta_hat)")
-    w = np.linalg.eigvalsh(J)
-    if w[0] <= 1e-10 * w[-1]:
-        raise ValueError(f"the variability J is singular (condition number "
-                         f"{w[-1] / max(w[0], 1e-300):.3g}): some combination of {names} has "
-                         f"a score that does not vary over the simulated fields")
 
 
 def _check_score_mean(target: Any, scores: np.ndarray, theta: np.ndarray) -> None:

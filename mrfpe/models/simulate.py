@@ -35,7 +35,7 @@ from mrfpe.validation import check_positive_int, check_seed
 
 configure_vector_width()  # before our first @njit, as mrfpe.brdf.engine does
 
-__all__ = ["METHODS", "check_simulation_size", "simulate", "swendsen_wang_form"]
+__all__ = ["METHODS", "check_simulation_size", "graph_size", "simulate", "swendsen_wang_form"]
 
 METHODS = ("auto", "gibbs", "swendsen_wang")
 _BLOCK = 4096  # nodes per parallel chunk of a colour class
@@ -347,13 +347,20 @@ def check_simulation_size(spec: Any, shape: Any, n: Any, n_sweeps: Any, thin: An
     """
     n, n_sweeps = check_positive_int("n", n), check_positive_int("n_sweeps", n_sweeps, 0)
     thin = check_positive_int("thin", thin)
+    if (size := graph_size(spec, shape)) is not None:
+        n_nodes, n_edges, node_shape = size
+        _check_memory(n_nodes, n_edges, n, n_sweeps, thin, node_shape)
+
+
+def graph_size(spec: Any, shape: Any) -> tuple[int, int, tuple[int, ...]] | None:
+    """``(nodes, edges at most, node shape)`` of a model's graph rule before the graph is
+    built (``None``: a lattice without a ``shape``, left to the model's own error)."""
     if isinstance(spec, LatticeSpec):
         if shape is None:
-            return
+            return None
         H, W = _check_shape(shape)
-        _check_memory(H * W, H * W * len(spec.offsets), n, n_sweeps, thin, (H, W))
-    else:
-        _check_memory(spec.n_nodes, spec.n_edges, n, n_sweeps, thin, (spec.n_nodes,))
+        return H * W, H * W * len(spec.offsets), (H, W)
+    return spec.n_nodes, spec.n_edges, (spec.n_nodes,)
 
 
 def _check_support(design: Design, node: np.ndarray, pair: np.ndarray,

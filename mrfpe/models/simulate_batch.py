@@ -45,7 +45,6 @@ from numba import njit, prange
 
 from mrfpe.budget import check_memory
 from mrfpe.models.design import Design, check_configurations
-from mrfpe.models.graph import LatticeSpec, _check_shape
 from mrfpe.models.multispin import lattice_parameters, multispin_gibbs, why_not
 from mrfpe.models.simulate import (
     _BLOCK,
@@ -56,6 +55,7 @@ from mrfpe.models.simulate import (
     _site,
     _swendsen_wang,
     _uniform,
+    graph_size,
     swendsen_wang_form,
 )
 from mrfpe.threads import limit_threads, thread_budget
@@ -204,13 +204,9 @@ def check_batch_size(spec: Any, shape: Any, B: int, n: Any, n_sweeps: Any, thin:
     before its graph is built (as :func:`~mrfpe.models.simulate.check_simulation_size`)."""
     n, n_sweeps = check_positive_int("n", n), check_positive_int("n_sweeps", n_sweeps, 0)
     thin = check_positive_int("thin", thin)
-    if isinstance(spec, LatticeSpec):
-        if shape is None:
-            return
-        H, W = _check_shape(shape)
-        _check_batch_memory(H * W, H * W * len(spec.offsets), (H, W), B, n, n_sweeps, thin)
-    else:
-        _check_batch_memory(spec.n_nodes, spec.n_edges, (spec.n_nodes,), B, n, n_sweeps, thin)
+    if (size := graph_size(spec, shape)) is not None:
+        n_nodes, n_edges, node_shape = size
+        _check_batch_memory(n_nodes, n_edges, node_shape, B, n, n_sweeps, thin)
 
 
 def _starts(init: Any, design: Design, B: int) -> list[Any]:

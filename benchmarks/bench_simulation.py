@@ -5,8 +5,10 @@ repeats are compared, so a shared, noisy machine slows both alike. Sweep cost is
 ``(t(K sweeps) - t(0 sweeps)) / K``: the one-off setup (tables, CSR, colouring) is left out.
 
 * ``scalar``: per-site update rate (updates/ns) of the scalar Gibbs sweep
-  (:func:`~mrfpe.models.simulate_batch.simulate_batch`, one chain, one thread) on a binary
-  4-neighbour lattice against :class:`NumpyCheckerboard`, a vectorised int8 NumPy
+  (:func:`~mrfpe.models.simulate_batch.simulate_batch`, one chain, one thread), the
+  lattice kernel (:mod:`mrfpe.models.lattice_gibbs`) against the general CSR kernel (the
+  same draws) on a binary 4-neighbour lattice at 512² and a 6-state one at 256², and on
+  the binary one against :class:`NumpyCheckerboard`, a vectorised int8 NumPy
   checkerboard sweep (goal: >= 6x);
 * ``batch``: 64 chains at 64 parameter vectors in one call against 64 single-chain calls,
   and the batch's aggregate per-site rate against one chain's (goal >= 10x once a
@@ -28,7 +30,8 @@ from __future__ import annotations
 
 import argparse
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 
 import numpy as np
 
@@ -120,29 +123,72 @@ def _sweep_seconds(run: Callable[[int], object], k: int, repeat: int) -> float:
                             for _ in range(repeat)]))
 
 
+@contextmanager
+def _general_kernel() -> Iterator[None]:
+    """Route simulate_batch's Gibbs chains to the general (CSR) kernel, as for a non-lattice."""
+    from mrfpe.models import simulate_batch as sb
+
+    saved = sb.lattice_stencil
+    sb.lattice_stencil = lambda design: None
+    try:
+        yield
+    finally:
+        sb.lattice_stencil = saved
+
+
 def scalar_vs_numpy(quick: bool) -> list[str]:
+    """The lattice kernel against the general CSR kernel (the same draws) and, on the binary
+    lattice, the NumPy checkerboard; one thread, the three alternated."""
+    return [*_scalar_case(2, 512, quick), "", *_scalar_case(6, 256, quick)]
+
+
+def _scalar_case(q: int, side: int, quick: bool) -> list[str]:
+    """One lattice size and q: the three samplers' per-site rates, as a table."""
     from mrfpe.models.simulate_batch import simulate_batch
     from mrfpe.threads import limit_threads
 
-    side, k, repeat = (128, 20, 2) if quick else (512, 60, 5)
-    design = _design(side)
-    psi = design.psi(np.array([[0.4, 0.05]]))
-    ref = NumpyCheckerboard((side, side), 0.4, 0.05)
-    ref.sweep(1)
-    numba_s, numpy_s = [], []
+    rows: list[str] = []
+    side, k, repeat = (side // 4, 20, 2) if quick else (side, 60, 5)
+    design = _design(side, q)
+    h = [0.05] if q == 2 else np.linspace(-0.1, 0.1, q - 1)  # q = 2: NumPy's model
+    psi = design.psi(np.array([[0.4, *h]]))
+
+    def sweeps(m: int) -> object:
+        return simulate_batch(design, psi, 1, seed=0, method="gibbs", n_sweeps=m,
+                              kernel="scalar")
+
+    def general(m: int) -> object:
+        with _general_kernel():
+            return sweeps(m)
+
+    ref = NumpyCheckerboard((side, side), 0.4, 0.05) if q == 2 else None
+    times: dict[str, list[float]] = {"lattice": [], "general": [], "numpy": []}
     with limit_threads(1):
         for _ in range(repeat):
-            numba_s.append(_sweep_seconds(lambda m: simulate_batch(
-                design, psi, 1, seed=0, method="gibbs", n_sweeps=m), k, 1))
-            numpy_s.append(_timed(lambda: ref.sweep(max(2, k // 10))) / max(2, k // 10))
-    a, b = (side * side / (np.median(t) * 1e9) for t in (numba_s, numpy_s))
-    return [f"**Scalar Gibbs, Ising {side}² (binary, 4-neighbour, J = 0.4), one thread**: "
-            f"medians of {repeat} alternated repeats.\n",
-            "| sampler | updates/ns | ns/update | ÷ NumPy time |", "|---|---|---|---|",
-            f"| simulate_batch gibbs (scalar, CSR) | {a:.3f} | {1 / a:.2f} | {a / b:.2f}× |",
-            f"| NumPy int8 checkerboard (reference) | {b:.3f} | {1 / b:.2f} | 1× |",
-            f"\nGoal ≥ 6×: {'met' if a / b >= 6 else 'not met'} ({a / b:.2f}×). "
-            f"Anchors: {ANCHORS}."]
+            times["lattice"].append(_sweep_seconds(sweeps, k, 1))
+            times["general"].append(_sweep_seconds(general, k, 1))
+            if ref is not None:
+                ref.sweep(1)
+                times["numpy"].append(_timed(lambda: ref.sweep(max(2, k // 10)))
+                                      / max(2, k // 10))
+    rate = {key: side * side / (np.median(t) * 1e9) for key, t in times.items() if t}
+    base = rate.get("numpy")
+    rows += [f"**Scalar Gibbs, {q}-state Potts {side}² (4-neighbour, "
+             f"coupling 0.4), one thread**: medians of {repeat} alternated repeats.\n",
+             "| sampler | updates/ns | ns/update | ÷ general kernel's time | ÷ NumPy time |",
+             "|---|---|---|---|---|"]
+    for key, label in (("lattice", "simulate_batch gibbs, lattice kernel (uint8 stencil)"),
+                       ("general", "simulate_batch gibbs, general kernel (CSR)"),
+                       ("numpy", "NumPy int8 checkerboard (reference, binary only)")):
+        if key in rate:
+            a = rate[key]
+            vs = f"{a / base:.2f}×" if base else "–"
+            rows.append(f"| {label} | {a:.3f} | {1 / a:.2f} | {a / rate['general']:.2f}× "
+                        f"| {vs} |")
+    if base:
+        rows.append(f"\nGoal ≥ 6× NumPy: {'met' if rate['lattice'] / base >= 6 else 'not met'}"
+                    f" ({rate['lattice'] / base:.2f}×). Anchors: {ANCHORS}.")
+    return rows
 
 
 def batch_vs_single(quick: bool) -> list[str]:

@@ -29,7 +29,9 @@ from numba import njit, prange
 
 from mrfpe.budget import check_memory
 from mrfpe.models.design import Design, check_configurations
+from mrfpe.models.gibbs_sites import _draw, _site, _uniform
 from mrfpe.models.graph import LatticeSpec, _check_shape
+from mrfpe.models.lattice_gibbs import lattice_stencil, run_lattice
 from mrfpe.threads import configure_vector_width, thread_budget
 from mrfpe.validation import check_positive_int, check_seed
 
@@ -39,100 +41,6 @@ __all__ = ["METHODS", "check_simulation_size", "graph_size", "simulate", "swends
 
 METHODS = ("auto", "gibbs", "swendsen_wang")
 _BLOCK = 4096  # nodes per parallel chunk of a colour class
-_GAMMA, _MIX1, _MIX2 = (np.uint64(0x9E3779B97F4A7C15), np.uint64(0xBF58476D1CE4E5B9),
-                        np.uint64(0x94D049BB133111EB))
-
-
-@njit(inline="always", cache=True)
-def _uniform(key: np.uint64, k: int) -> float:
-    """Output ``k`` of SplitMix64 seeded ``key``, in [0, 1) (53 bits)."""
-    z = key + np.uint64(k) * _GAMMA
-    z = (z ^ (z >> np.uint64(30))) * _MIX1
-    z = (z ^ (z >> np.uint64(27))) * _MIX2
-    return np.int64((z ^ (z >> np.uint64(31))) >> np.uint64(11)) * 1.1102230246251565e-16
-
-
-@njit(inline="always", cache=True)
-def _pick(w: np.ndarray, u: float) -> int:
-    """Inverse-CDF draw from weights ``w >= 0``; ``-1`` if they (nearly) underflow."""
-    total = w.sum()
-    if not total > 1e-280:
-        return -1
-    target, acc, a = u * total, 0.0, 0
-    for b in range(w.size):  # branch-free: a = how many CDF values are <= target
-        acc += w[b]
-        a += target >= acc
-    return a if a < w.size else np.flatnonzero(w)[-1]  # u * total rounded up to total
-
-
-@njit(inline="always", cache=True)
-def _draw(w: np.ndarray, u: float) -> int:
-    """Inverse-CDF draw from log-weights ``w`` (overwritten); ``-1`` if all are -inf."""
-    m = w.max()  # all -inf: NaN weights, and _pick gives -1
-    for a in range(w.size):
-        w[a] = np.exp(w[a] - m)
-    return _pick(w, u)
-
-
-@njit(inline="always", cache=True)
-def _site(i, x, node, pair, enode, epair, indptr, nbr, ntab, u, w) -> None:
-    """Gibbs update of node ``i``: weights as products of exponentiated tables (``epair``
-    rows ``t * q + x_j``; no ``exp`` per site, scalars for q = 2); log-weights on
-    underflow."""
-    q, r, single = w.size, i if node.shape[0] > 1 else np.uint32(0), epair.shape[0] == w.size
-    if q == 2:
-        w0, w1 = enode[r, 0], enode[r, 1]
-        for k in range(indptr[i], indptr[i + 1]):
-            row = x[nbr[k]] if single else np.uint32(ntab[k] * 2 + x[nbr[k]])
-            w0 *= epair[row, 0]
-            w1 *= epair[row, 1]
-        if w0 + w1 > 1e-280:
-            x[i] = 1 if u * (w0 + w1) >= w0 else 0
-            return
-    w[:] = enode[r]
-    for k in range(indptr[i], indptr[i + 1]):
-        row = x[nbr[k]] if single else np.uint32(ntab[k] * q + x[nbr[k]])
-        for a in range(q):
-            w[a] *= epair[row, a]
-    a = _pick(w, u)
-    x[i] = a if a >= 0 else _log_site(i, r, x, node, pair, indptr, nbr, ntab, u, w)
-
-
-@njit(inline="always", cache=True)
-def _n_forbidden(i, b, x, pair, indptr, nbr, ntab) -> int:
-    """How many of node ``i``'s neighbours forbid (-inf) its state ``b``."""
-    c = 0
-    for k in range(indptr[i], indptr[i + 1]):
-        c += pair[ntab[k], x[nbr[k]], b] == -np.inf
-    return c
-
-
-@njit(cache=True)
-def _log_site(i, r, x, node, pair, indptr, nbr, ntab, u, w) -> int:
-    """Node ``i``'s state from log-weights, where every product underflowed: among the
-    states its node potential allows, those meeting the fewest forbidden (-inf) pairs (a
-    chain not yet in the support), drawn by their finite log-potentials. Forbidden entries
-    are counted apart, never summed as a large negative number a finite one could meet."""
-    q, fewest = w.size, np.int64(indptr[i + 1]) - np.int64(indptr[i]) + 1
-    for b in range(q):
-        if node[r, b] > -np.inf:
-            fewest = min(fewest, _n_forbidden(i, b, x, pair, indptr, nbr, ntab))
-    for b in range(q):
-        w[b] = -np.inf
-        if node[r, b] > -np.inf and _n_forbidden(i, b, x, pair, indptr, nbr, ntab) == fewest:
-            w[b] = node[r, b]
-            for k in range(indptr[i], indptr[i + 1]):
-                p = pair[ntab[k], x[nbr[k]], b]
-                w[b] += p if p > -np.inf else 0.0
-    a = _draw(w, u)
-    if a < 0:  # the finite log-weights overflowed (log-potentials near 1e308): the first
-        for b in range(q):
-            if node[r, b] > -np.inf and _n_forbidden(i, b, x, pair, indptr, nbr,
-                                                     ntab) == fewest:
-                return b
-    return a
-
-
 @njit(cache=True, parallel=True)
 def _gibbs(x, order, cptr, node, pair, enode, epair, indptr, nbr, ntab, key, slot, out) -> None:
     """``slot.size`` sweeps over the colour classes ``order[cptr[c]:cptr[c + 1]]``; after
@@ -306,10 +214,12 @@ def simulate(design: Design, psi: np.ndarray, n: int = 1, *, seed: int | None = 
         indptr, nbr, eidx = (a.astype(np.uint32) for a in g.neighbours())
         # symmetric tables: row t * q + x_j of the exponentiated pair tables weighs x_i
         tables = (np.ascontiguousarray(node), np.ascontiguousarray(pair), _exp_rows(node),
-                  _exp_rows(pair).reshape(-1, q))
+                  _exp_rows(pair).reshape(-1, q), indptr, nbr, etab[eidx].astype(np.uint32))
         with thread_budget(g.n_nodes * q // 4):  # threads from ~1.6e6 site-states a sweep
-            _gibbs(x.astype(np.uint32), order, cptr, *tables, indptr, nbr,
-                   etab[eidx].astype(np.uint32), key, slot, out)
+            if (stencil := lattice_stencil(design)) is None:
+                _gibbs(x.astype(np.uint32), order, cptr, *tables, key, slot, out)
+            else:  # the same draws by stencil arithmetic (mrfpe.models.lattice_gibbs)
+                run_lattice(stencil, x, *tables, key, slot, out)
     hard = not np.all(np.isfinite(pair))  # then check that every draw is in the support
     if bad := [k for k, xk in enumerate(out)
                if hard and np.isneginf(pair[etab, xk[e[:, 0]], xk[e[:, 1]]]).any()]:

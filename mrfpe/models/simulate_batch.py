@@ -45,6 +45,8 @@ from numba import njit, prange
 
 from mrfpe.budget import check_memory
 from mrfpe.models.design import Design, check_configurations
+from mrfpe.models.gibbs_sites import _site, _uniform
+from mrfpe.models.lattice_gibbs import lattice_stencil, run_lattice
 from mrfpe.models.multispin import lattice_parameters, multispin_gibbs, why_not
 from mrfpe.models.simulate import (
     _BLOCK,
@@ -52,9 +54,7 @@ from mrfpe.models.simulate import (
     _check_support,
     _exp_rows,
     _init,
-    _site,
     _swendsen_wang,
-    _uniform,
     graph_size,
     swendsen_wang_form,
 )
@@ -338,14 +338,20 @@ def _run_gibbs(design: Design, rows: np.ndarray, X: np.ndarray, node: np.ndarray
     Xs, outs = X[rows].astype(np.uint32), np.empty((B, *out.shape[1:]), dtype=np.int64)
     outs[:] = out[rows]
     common = (indptr, nbr, etab[eidx].astype(np.uint32), keys[rows], slot, outs)
-    threads = numba.get_num_threads()
+    threads, stencil = numba.get_num_threads(), lattice_stencil(design)
     with numba.parallel_chunksize(1):  # dynamic: a descheduled thread holds one piece
         if B >= threads:  # a thread sharing its core with another process holds all back
             with limit_threads(spare_cores()):
-                _gibbs_chains(Xs, order, *tables, *common)
+                if stencil is None:
+                    _gibbs_chains(Xs, order, *tables, *common)
+                else:  # the same draws by stencil arithmetic (mrfpe.models.lattice_gibbs)
+                    run_lattice(stencil, Xs, *tables, *common, chains=True)
         else:  # threads from ~1.6e6 site-states a sweep (as simulate), on idle cores only
             with limit_threads(spare_cores()), thread_budget(B * g.n_nodes * q // 4):
-                _gibbs_blocks(Xs, order, cptr, *tables, *common)
+                if stencil is None:
+                    _gibbs_blocks(Xs, order, cptr, *tables, *common)
+                else:
+                    run_lattice(stencil, Xs, *tables, *common, chains=False)
     out[rows] = outs
 
 

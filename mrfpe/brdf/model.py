@@ -82,6 +82,8 @@ class BRDFLikelihood(Target):
     ``log_prob`` is not a density over theta (``normalised = False``).
     """
 
+    calibrated = True
+
     normalised = False
     data_kind = "scene"
     n_observations = 1

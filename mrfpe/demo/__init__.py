@@ -147,6 +147,9 @@ def main(out_dir: str | Path = "mrfpe-demo", quick: bool = False, seed: int = 0)
     say(f"effective sample size {post.attrs['diag_ess']:.0f} of {post.sizes['sample']} "
         f"particles: the posterior is {'reliable' if reliable else 'NOT reliable'} "
         "(mrfpe.posterior.diagnose)")
+    if int(post.attrs.get("target_calibrated", -1)) == 0:
+        say("It is a pseudo-posterior: exp(PL) normalised, as in the thesis; its spread is the "
+            "PL's,\nnot a Bayesian posterior's (mrfpe.posterior.caveats).")
     say("")
     say(_verdict(float(np.linalg.norm(m - truth)), m_lt - truth_lt, inside, names))
     if cfg.thesis:

@@ -235,6 +235,8 @@ class AdjustedPL(Target):
     fisher_information, W, mle : the calibration.
     """
 
+    calibrated = True
+
     data_kind = "configurations"
 
     def __init__(self, pl: Any, lik: Any, *, mode: str = "mcmc_mle", align: str = "moments",

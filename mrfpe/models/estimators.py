@@ -75,6 +75,8 @@ class ModelTarget(Target):
 class ConditionalTarget(ModelTarget):
     """``sum_r w_r log p(alternative_r | blanket_r)`` over distinct conditional rows."""
 
+    calibrated = False
+
     def __init__(self, *, rows: Sequence[ConditionalRows], nodes: np.ndarray | None = None,
                  blocks: Sequence[np.ndarray] | None = None, **kwargs: Any) -> None:
         super().__init__(**kwargs)
@@ -141,6 +143,8 @@ class ConditionalTarget(ModelTarget):
 class ExactTarget(ModelTarget):
     """The exact log-likelihood ``sum_m log p(x_m | theta)`` (tractable models only)."""
 
+    calibrated = True
+
     def __init__(self, *, method: str = "auto", **kwargs: Any) -> None:
         super().__init__(**kwargs)
         from mrfpe.models.exact import LogPartition
@@ -174,6 +178,8 @@ class LikelihoodTarget(ModelTarget):
     its own. Samplers for doubly-intractable posteriors use it with
     :meth:`simulate` (auxiliary draws at a proposed theta).
     """
+
+    calibrated = True
 
     #: ``log_prob`` is not a density over theta (it omits ``-M log Z(theta)``).
     normalised = False

@@ -22,8 +22,12 @@ the kept chain spans 50 τ; absent: independent chains); the diagnostics of
 :func:`diagnose` as ``diag_ess``,
 ``diag_ess_kish``, ``diag_ess_chain``, ``diag_pareto_k``, ``diag_rhat`` (floats, NaN
 where not applicable), ``diag_reliable`` (1 or 0) and ``diag_messages`` (the reasons,
-one per line); every attribute is of a type netCDF stores, so a posterior writes
-with plain ``Dataset.to_netcdf`` and reads back with ``xarray.open_dataset``
+one per line); ``target_calibrated`` (1: the target is a likelihood, 0: a composite
+likelihood, so the result is a pseudo-posterior; -1: not declared) and
+``diag_caveats`` (:func:`caveats`: what the result cannot say whatever its Monte Carlo
+error -- a pseudo-posterior, a parameter held by a face of the box -- one per line;
+they do not change ``diag_reliable``); every attribute is of a type netCDF stores, so a
+posterior writes with plain ``Dataset.to_netcdf`` and reads back with ``xarray.open_dataset``
 (:func:`save`/:func:`load` keep exact types and NaN as well); optional
 ``log_evidence`` and ``log_evidence_se`` (floats): the log normaliser
 of the target *relative to the box*, ``log(∫_box p / vol(box))`` (the evidence under
@@ -40,6 +44,7 @@ Modules
 -------
 :mod:`~mrfpe.posterior.schema` (:func:`build`, :func:`validate`),
 :mod:`~mrfpe.posterior.diagnostics` (:func:`diagnose`, :class:`PosteriorWarning`),
+:mod:`~mrfpe.posterior.caveats` (:func:`caveats`),
 :mod:`~mrfpe.posterior.statistics` (:func:`weights`, :func:`weighted_mean`,
 :func:`weighted_cov`, :func:`weighted_quantiles`, :func:`map_estimate`,
 :func:`resample`), :mod:`~mrfpe.posterior.io` (exact netCDF :func:`save` /
@@ -52,6 +57,7 @@ from the leaf module :mod:`mrfpe.resampling`. Everything is re-exported here.
 from __future__ import annotations
 
 from mrfpe.posterior.arviz import to_arviz
+from mrfpe.posterior.caveats import caveats
 from mrfpe.posterior.diagnostics import PosteriorWarning, diagnose, stored_messages
 from mrfpe.posterior.io import load, save
 from mrfpe.posterior.report import summary
@@ -67,8 +73,8 @@ from mrfpe.posterior.statistics import (
 from mrfpe.resampling import ess, log_evidence, normalise_log_weights, perplexity
 
 __all__ = [
-    "PosteriorWarning", "build", "diagnose", "ess", "load", "log_evidence", "map_estimate",
-    "normalise_log_weights", "perplexity", "resample", "save", "stored_messages", "summary",
-    "to_arviz",
+    "PosteriorWarning", "build", "caveats", "diagnose", "ess", "load", "log_evidence",
+    "map_estimate", "normalise_log_weights", "perplexity", "resample", "save",
+    "stored_messages", "summary", "to_arviz",
     "validate", "weighted_cov", "weighted_mean", "weighted_quantiles", "weights",
 ]

@@ -7,6 +7,7 @@ import math
 import numpy as np
 import xarray as xr
 
+from mrfpe.posterior.caveats import caveats
 from mrfpe.posterior.diagnostics import diagnose, stored_messages
 from mrfpe.posterior.statistics import map_estimate, weighted_cov, weighted_mean, weighted_quantiles
 from mrfpe.resampling import ess, perplexity
@@ -30,6 +31,9 @@ def _diagnostics_lines(post: xr.Dataset) -> list[str]:
              f"{fmt(d['pareto_k'], '.2f')}, R̂ {fmt(d['rhat'], '.3f')}: "
              + ("reliable" if d["reliable"] else "UNRELIABLE")]
     lines += [f"  - {m}" for m in d["messages"]]
+    stored = post.attrs.get("diag_caveats")
+    lines += [f"  caveat: {c}" for c in (caveats(post) if stored is None
+                                         else str(stored).splitlines())]
     ev = post.attrs.get("log_evidence")
     if ev is not None:
         lines.append(f"log evidence (relative to the box: log ∫p / vol) {ev:.6g} ± "

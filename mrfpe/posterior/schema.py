@@ -13,6 +13,7 @@ import xarray as xr
 from scipy.special import logsumexp
 
 from mrfpe._version import __version__
+from mrfpe.posterior.caveats import calibration_flag, caveats
 from mrfpe.posterior.diagnostics import ATTRS as _DIAG_ATTRS
 from mrfpe.posterior.diagnostics import (
     CHAIN_TYPES,
@@ -150,6 +151,7 @@ def build(theta: Any, log_target: Any, *, param_names: Any, log_weight: Any = No
                       attrs=attrs)
     diag = diagnose(post)
     post.attrs.update(diagnostics_attrs(diag))
+    post.attrs["diag_caveats"] = "\n".join(caveats(post))
     warn_if_unreliable(diag, sampler)
     return post
 
@@ -234,6 +236,7 @@ def _attributes(sampler: str, config: dict | None, seed: int | None, target: Any
         "n_target_evals": float(n_target_evals),
         "wall_time_s": float(wall_time_s),
         "kind": kind,
+        "target_calibrated": calibration_flag(target),
     }
     for key, value in (("log_evidence", log_evidence), ("log_evidence_se", log_evidence_se)):
         v = _optional_float(key, value)
@@ -258,7 +261,7 @@ _REQUIRED_ATTRS = {"sampler": str, "config": str, "seed": int, "target": str,
                    "mrfpe_version": str, "n_target_evals": float, "wall_time_s": float}
 #: Attributes checked when present (build always writes ``kind`` and the ``diag_*``).
 _OPTIONAL_ATTRS = {"kind": str, "chain_type": str, "log_evidence": float, "log_evidence_se": float,
-                   **_DIAG_ATTRS}
+                   "target_calibrated": int, "diag_caveats": str, **_DIAG_ATTRS}
 
 
 def _attr_ok(v: Any, typ: type, key: str = "") -> bool:

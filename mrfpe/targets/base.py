@@ -73,6 +73,13 @@ class Target:
         Cost of one evaluation in full-lattice-equivalent evaluations (1 for a
         full target, ``1/k`` for one of ``k`` sub-lattices). Samplers add up
         ``cost`` per evaluated particle to report ``n_target_evals``.
+    calibrated : bool or None
+        ``True``: ``exp(log_prob)`` is a likelihood (or a posterior calibrated to one), so
+        a posterior of it is the Bayesian posterior under the flat prior on the bounds;
+        ``False``: a composite likelihood (a pseudolikelihood), whose "posterior" is a
+        pseudo-posterior -- its location and spread are not the Bayesian posterior's;
+        ``None`` (the default): not declared. Every posterior records it and says so
+        (:func:`mrfpe.posterior.caveats`).
     """
 
     param_names: tuple[str, ...] = ()
@@ -82,6 +89,8 @@ class Target:
     option_specs: tuple = ()
     #: What :func:`mrfpe.targets.get` passes as the first argument ("scene", "configurations").
     data_kind: str = "data"
+    #: Is ``exp(log_prob)`` a likelihood (True), a composite likelihood (False) or undeclared?
+    calibrated: bool | None = None
 
     @property
     def ndim(self) -> int:

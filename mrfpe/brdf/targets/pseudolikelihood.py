@@ -80,6 +80,8 @@ def _robust(x: np.ndarray, sigma: float, e: float) -> np.ndarray:
 class PL(BRDFTarget):
     """Pseudolikelihood of the BRDF MRF, thesis 4.23-4.24 / 5.64-5.66 (no unary energy)."""
 
+    calibrated = False
+
     name = "pl"
 
 
@@ -94,6 +96,8 @@ class PLS(BRDFTarget):
         ``w`` is the same as a prior scale ``sigma / w`` (synthetic scenes use
         ``sigma = B/5`` label steps, ``make_scene(prior_sigma=...)``); 0 gives ``pl``.
     """
+
+    calibrated = False
 
     name = "pls"
 
@@ -127,6 +131,8 @@ class PL3(BRDFTarget):
     temperature : float, default 1
         ``T`` of 6.60.
     """
+
+    calibrated = False
 
     name = "pl3"
 
@@ -187,6 +193,8 @@ class PL2(BRDFTarget):
     match_sigma, match_e : float, default 1.0, 0.01
         ``sigma_d`` and ``e_d`` of 6.23.
     """
+
+    calibrated = False
 
     name = "pl2"
 
@@ -275,6 +283,8 @@ class CompositeMarginalLikelihood(BRDFTarget):
     prior : "auto" | "range" | "beliefs" | "none"
         "auto" uses the scene's range prior, else its beliefs, else none.
     """
+
+    calibrated = False
 
     name = "pml"
     _a, _b = 0.0, 1.0

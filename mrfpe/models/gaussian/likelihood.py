@@ -61,6 +61,8 @@ class GaussianExactTarget(GaussianTarget):
     (eigen where known).
     """
 
+    calibrated = True
+
     def __init__(self, *, method: str = "auto", **kwargs: Any) -> None:
         super().__init__(**kwargs)
         st = self.structure
@@ -124,6 +126,8 @@ class GaussianLikelihoodTarget(GaussianTarget):
     over theta on its own; doubly-intractable samplers (the exchange algorithm)
     use it with :meth:`simulate`. It is ``-inf`` outside the PD region.
     """
+
+    calibrated = True
 
     #: Draws are exact (Cholesky / FFT): the exchange algorithm is then exact too.
     exact_simulator = True

@@ -40,6 +40,8 @@ class GaussianPLTarget(GaussianTarget):
     ``sum e_i^2 = b' S b`` (see the module docstring): one small quadratic form per theta.
     """
 
+    calibrated = False
+
     def __init__(self, *, nodes: np.ndarray | None = None, **kwargs: Any) -> None:
         super().__init__(**kwargs)
         G = self._G()
@@ -66,6 +68,8 @@ class GaussianPLTarget(GaussianTarget):
 
 class GaussianBlockTarget(GaussianTarget):
     """Block pseudolikelihood: ``sum_B log p(x_B | x_rest)`` (see the module docstring)."""
+
+    calibrated = False
 
     def __init__(self, *, blocks: Sequence[np.ndarray], **kwargs: Any) -> None:
         super().__init__(**kwargs)

@@ -110,7 +110,7 @@ def menteith_section(rows: list[dict]) -> list[str]:
                     "exchange with 200 Swendsen–Wang sweeps per auxiliary draw)."]
     if (HERE / "menteith.png").exists():
         out += ["", "![Menteith: image, segmentation and uncertainty](menteith.png)"]
-    msgs = {m: by[m]["messages"] for m in by if by[m]["messages"]}
+    msgs = {m: "; ".join(by[m]["messages"].splitlines()) for m in by if by[m]["messages"]}
     out += ["", *(f"- `{m}`: {msg}" for m, msg in msgs.items())]
     return [*out, ""]
 

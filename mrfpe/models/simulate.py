@@ -37,7 +37,8 @@ from mrfpe.validation import check_positive_int, check_seed
 
 configure_vector_width()  # before our first @njit, as mrfpe.brdf.engine does
 
-__all__ = ["METHODS", "check_simulation_size", "graph_size", "simulate", "swendsen_wang_form"]
+__all__ = ["METHODS", "check_run", "check_simulation_size", "graph_size", "simulate",
+           "swendsen_wang_form"]
 
 METHODS = ("auto", "gibbs", "swendsen_wang")
 _BLOCK = 4096  # nodes per parallel chunk of a colour class
@@ -177,12 +178,7 @@ def simulate(design: Design, psi: np.ndarray, n: int = 1, *, seed: int | None = 
     -------
     (n, n_nodes) int64
     """
-    if not isinstance(design, Design):
-        raise ValueError(f"design must be an mrfpe.models Design; got {type(design).__name__}")
-    n, n_sweeps = check_positive_int("n", n), check_positive_int("n_sweeps", n_sweeps, 0)
-    thin = check_positive_int("thin", thin)
-    if not isinstance(method, str) or method not in METHODS:
-        raise ValueError(f"method must be one of {', '.join(METHODS)}; got {method!r}")
+    n, n_sweeps, thin = check_run(design, n, n_sweeps, thin, method)
     rng = np.random.default_rng(check_seed(seed))
     g, q = design.graph, design.q
     _check_memory(g.n_nodes, g.n_edges, n, n_sweeps, thin, g.shape or (g.n_nodes,))
@@ -260,6 +256,19 @@ def check_simulation_size(spec: Any, shape: Any, n: Any, n_sweeps: Any, thin: An
     if (size := graph_size(spec, shape)) is not None:
         n_nodes, n_edges, node_shape = size
         _check_memory(n_nodes, n_edges, n, n_sweeps, thin, node_shape)
+
+
+def check_run(design: Any, n: Any, n_sweeps: Any, thin: Any, method: Any
+              ) -> tuple[int, int, int]:
+    """``(n, n_sweeps, thin)`` checked, and the design and method, for a simulator's call;
+    ValueError naming the argument."""
+    if not isinstance(design, Design):
+        raise ValueError(f"design must be an mrfpe.models Design; got {type(design).__name__}")
+    n, n_sweeps = check_positive_int("n", n), check_positive_int("n_sweeps", n_sweeps, 0)
+    thin = check_positive_int("thin", thin)
+    if not isinstance(method, str) or method not in METHODS:
+        raise ValueError(f"method must be one of {', '.join(METHODS)}; got {method!r}")
+    return n, n_sweeps, thin
 
 
 def graph_size(spec: Any, shape: Any) -> tuple[int, int, tuple[int, ...]] | None:

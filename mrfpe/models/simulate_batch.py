@@ -50,11 +50,11 @@ from mrfpe.models.lattice_gibbs import lattice_stencil, run_lattice
 from mrfpe.models.multispin import lattice_parameters, multispin_gibbs, why_not
 from mrfpe.models.simulate import (
     _BLOCK,
-    METHODS,
     _check_support,
     _exp_rows,
     _init,
     _swendsen_wang,
+    check_run,
     graph_size,
     swendsen_wang_form,
 )
@@ -290,12 +290,7 @@ def simulate_batch(design: Design, psi_rows: np.ndarray, n: int = 1, *,
     -------
     (B, n, n_nodes) int64
     """
-    if not isinstance(design, Design):
-        raise ValueError(f"design must be an mrfpe.models Design; got {type(design).__name__}")
-    n, n_sweeps = check_positive_int("n", n), check_positive_int("n_sweeps", n_sweeps, 0)
-    thin = check_positive_int("thin", thin)
-    if not isinstance(method, str) or method not in METHODS:
-        raise ValueError(f"method must be one of {', '.join(METHODS)}; got {method!r}")
+    n, n_sweeps, thin = check_run(design, n, n_sweeps, thin, method)
     if not isinstance(kernel, str) or kernel not in KERNELS:
         raise ValueError(f"kernel must be one of {', '.join(KERNELS)}; got {kernel!r}")
     psi = _check_psi_rows(design, psi_rows)

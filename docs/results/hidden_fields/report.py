@@ -88,8 +88,8 @@ def menteith_section(rows: list[dict]) -> list[str]:
            "uniform on (0, 3), each sd² inverse gamma (2.5, 1000) (scale 20, 5 degrees of "
            "freedom); the means' prior is ours (normal, centred on the data's mean, sd its "
            "range; ordered), where bayesImageS centres each on its own value.", "",
-           "| method | β mean (sd) | means | sds | seconds | reliable | note |",
-           "|---|---|---|---|---|---|---|"]
+           "| method | sweeps | β mean (sd) | means | sds | seconds | reliable | note |",
+           "|---|---|---|---|---|---|---|---|"]
     by = {r["method"]: r for r in rows}
     for m in METHODS:
         if m not in by:
@@ -102,12 +102,16 @@ def menteith_section(rows: list[dict]) -> list[str]:
                 f"({r['surrogate']['n_design']} design points)" if m == "surrogate" else
                 f"{r['attrs'].get('aux_sweeps', 0):.0f} auxiliary sweeps" if m == "exchange"
                 else "")
-        out.append(f"| `{m}` | {p['coupling']['mean']:.3f} ({p['coupling']['sd']:.3f}) | "
+        out.append(f"| `{m}` | 4 x {r['n_steps']} | "
+                   f"{p['coupling']['mean']:.3f} ({p['coupling']['sd']:.3f}) | "
                    f"{means} | {sds} | {sec:.0f} | {r['reliable']} | {note} |")
     if "exchange" in by and "surrogate" in by:
+        per = {m: by[m]["seconds"] / by[m]["n_steps"] for m in ("exchange", "surrogate")}
         ratio = by["exchange"]["seconds"] / (by["surrogate"]["seconds"]
                                              + by["surrogate"]["surrogate_build_seconds"])
-        out += ["", f"Exchange took {ratio:.1f} x the surrogate's time, its build included "
+        out += ["", f"Per sweep, exchange took {per['exchange'] / per['surrogate']:.0f} x the "
+                    f"surrogate's sampling; a whole exchange run {ratio:.1f} x a whole surrogate "
+                    "run, its build included "
                     "(bayesImageS reports its surrogate about 200 x faster than its approximate "
                     "exchange with 200 Swendsen–Wang sweeps per auxiliary draw)."]
     if (HERE / "menteith.png").exists():

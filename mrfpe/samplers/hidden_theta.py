@@ -119,7 +119,7 @@ class ThetaUpdate:
 
 
 class AdjustedPLUpdate(ThetaUpdate):
-    """``"pl_adjusted"``: the calibrated pseudolikelihood, its map built at the start labels."""
+    """``"pl_adjusted"``: the calibrated pseudolikelihood, its map built halfway through burn-in."""
 
     method = "pl_adjusted"
     adjusted: Any = None

@@ -89,8 +89,9 @@ class HiddenSampler(Sampler):
         Batches per chain of the label probabilities' Monte Carlo error.
     aux_sweeps : "auto" | int
         ``method="exchange"``: sweeps of the auxiliary chain per proposal, started from
-        the chain's labels; ``"auto"``: ``10 τ`` of the MRF's simulator at the start point
-        (at least 10, at most ``max_aux_sweeps``).
+        the chain's labels; ``"auto"``: ``10 τ`` of the MRF's simulator at the start point,
+        measured again at the chains' mean at the end of burn-in (at least 10, at most
+        ``max_aux_sweeps``).
     max_aux_sweeps : int
         Cap of the automatic choice.
     """
@@ -144,6 +145,8 @@ class HiddenSampler(Sampler):
         for t in range(n):
             if t == prepare_at and mrf_free:
                 update.prepare(state, prepare_seed)
+            if t == self.burn_in and mrf_free:
+                update.after_burn_in(state, prepare_seed + 1)
             state, info = hidden_step(target, state, walks, rng, theta_update=update,
                                       theta_steps=self.theta_steps,
                                       swendsen_wang=self.labels == "swendsen_wang",

@@ -86,6 +86,9 @@ class ThetaUpdate:
     def prepare(self, state: Any, seed: int) -> None:
         """Anything built once (here nothing)."""
 
+    def after_burn_in(self, state: Any, seed: int) -> None:
+        """A last adaptation at the end of burn-in (here nothing)."""
+
     def log_density(self, x: np.ndarray, rows: ConditionalRows | None = None) -> Any:
         """``mrf vectors (k, d_mrf) -> (k,)`` of one chain's labels ``x`` (their conditional
         rows ``rows``, if built: :meth:`LabelField.conditional_rows
@@ -184,12 +187,22 @@ class ExchangeUpdate(ThetaUpdate):
                                estimator="likelihood")
         self.tau_start = autocorrelation_time(self.lik, state.params[0, : self.target.n_mrf],
                                               seed=seed)
+        self.sweeps = self._sweeps(self.tau_start)
+
+    def after_burn_in(self, state: Any, seed: int) -> None:
+        """``aux_sweeps="auto"``: ``10 τ`` measured again, at the chains' mean after burn-in
+        (near a first-order transition τ there ran to 5 x its value at the start point)."""
         if self.aux_sweeps == "auto":
-            tau = self.tau_start
-            self.sweeps = (self.max_aux_sweeps if not math.isfinite(tau)
-                           else int(min(max(10, math.ceil(10 * tau)), self.max_aux_sweeps)))
-        else:
-            self.sweeps = int(self.aux_sweeps)
+            mean = state.params[:, : self.target.n_mrf].mean(axis=0)
+            self.tau_burn_in = autocorrelation_time(self.lik, mean, seed=seed)
+            self.sweeps = self._sweeps(self.tau_burn_in)
+
+    def _sweeps(self, tau: float) -> int:
+        if self.aux_sweeps != "auto":
+            return int(self.aux_sweeps)
+        if not math.isfinite(tau):
+            return self.max_aux_sweeps
+        return int(min(max(10, math.ceil(10 * tau)), self.max_aux_sweeps))
 
     def step(self, state: Any, walk: AdaptiveRandomWalk | None, rng: np.random.Generator,
              theta_steps: int, rows: list[ConditionalRows] | None = None) -> float:
@@ -230,6 +243,7 @@ class ExchangeUpdate(ThetaUpdate):
 
     def attrs(self) -> dict:
         return {"aux_sweeps": float(self.sweeps), "aux_tau_start": float(self.tau_start),
+                "aux_tau_burn_in": float(getattr(self, "tau_burn_in", math.nan)),
                 "aux_tau_posterior_mean": float(getattr(self, "tau_end", math.nan))}
 
 

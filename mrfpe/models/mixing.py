@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["PILOT_CHUNK", "autocorrelation_time", "summary_statistics"]
+__all__ = ["PILOT_CHUNK", "autocorrelation_time", "statistics_tau", "summary_statistics"]
 
 #: Sweeps per pilot chunk when measuring the autocorrelation time.
 PILOT_CHUNK = 250
@@ -28,6 +28,23 @@ def summary_statistics(target: Any, y: np.ndarray, theta: np.ndarray) -> np.ndar
     return np.array([target.unnormalised(theta, yi[None])[0] for yi in y])[:, None]
 
 
+def statistics_tau(s: np.ndarray) -> float:
+    """The largest integrated autocorrelation time (emcee's estimator) over the columns of
+    a chain of statistics ``s`` (n, k), each standardised; 1 when none of them moves."""
+    import logging
+
+    from emcee.autocorr import integrated_time
+
+    # emcee logs a caution when the chain is short; the callers judge the length themselves
+    logging.getLogger("emcee.autocorr").setLevel(logging.ERROR)
+    sd = s.std(axis=0)
+    moving = sd > 0
+    if not moving.any():
+        return 1.0
+    z = (s[:, moving] - s[:, moving].mean(axis=0)) / sd[moving]
+    return float(np.max(integrated_time(z[:, None, :], quiet=True)))
+
+
 def autocorrelation_time(target: Any, theta: np.ndarray, *, seed: int,
                          max_sweeps: int = 20000, min_sweeps: int = 2000) -> float:
     """Integrated autocorrelation time (sweeps) of the target's simulator at ``theta``.
@@ -38,13 +55,6 @@ def autocorrelation_time(target: Any, theta: np.ndarray, *, seed: int,
     ``max_sweeps`` is reached; returns the largest τ over the standardised
     statistics (``inf`` when the chain is shorter than 20 τ at the cap).
     """
-    import logging
-
-    from emcee.autocorr import integrated_time
-
-    # emcee logs a caution when the chain is short; this loop judges the length itself
-    logging.getLogger("emcee.autocorr").setLevel(logging.ERROR)
-
     rng = np.random.default_rng(seed)
     x0 = getattr(target, "x", None)
     init: Any = "random" if x0 is None else x0[0]
@@ -56,12 +66,9 @@ def autocorrelation_time(target: Any, theta: np.ndarray, *, seed: int,
         rows.append(summary_statistics(target, y, theta))
         length += PILOT_CHUNK
         s = np.concatenate(rows)
-        sd = s.std(axis=0)
-        keep = sd > 0
-        if not keep.any():
+        if not np.any(s.std(axis=0) > 0):
             return 1.0  # the statistics do not move at all: nothing to wait for
-        z = (s[:, keep] - s[:, keep].mean(axis=0)) / sd[keep]
-        tau = float(np.max(integrated_time(z[:, None, :], quiet=True)))
+        tau = statistics_tau(s)
         if length >= min_sweeps and length >= 50 * tau:
             return tau
         if length >= max_sweeps:

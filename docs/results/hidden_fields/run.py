@@ -41,7 +41,6 @@ import zlib
 from pathlib import Path
 
 import numpy as np
-from scipy.special import logsumexp
 
 import mrfpe
 from mrfpe import models
@@ -116,16 +115,10 @@ def summary(post, seconds: float, truth: dict | None = None) -> dict:
 # -- exact ------------------------------------------------------------------------------------
 def exact_posterior(y: np.ndarray) -> dict:
     sys.path.insert(0, str(ROOT))
-    from tests.models.hidden.transfer import gaussian_loglik, log_z_product
+    from tests.models.hidden.transfer import coupling_posterior
 
-    H, W = SHAPE
-    L = gaussian_loglik(y.ravel(), MEANS, SD)
-    grid = np.linspace(*BOUNDS, 501)
-    lp = np.array([log_z_product(H, W, Q, b, None, L) - log_z_product(H, W, Q, b)
-                   for b in grid])
-    w = np.exp(lp - logsumexp(lp))
-    m = float(w @ grid)
-    return {"mean": m, "sd": float(np.sqrt(w @ (grid - m) ** 2))}
+    m, sd = coupling_posterior(y, *SHAPE, Q, MEANS, SD, np.linspace(*BOUNDS, 501))
+    return {"mean": m, "sd": sd}
 
 
 def hidden_model(shared_sd: bool = True, **emission):

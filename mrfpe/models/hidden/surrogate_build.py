@@ -25,6 +25,7 @@ from scipy.stats import qmc
 
 from mrfpe.models.design import Design
 from mrfpe.models.hidden.surrogate import SURROGATE_TOL, Surrogate, is_log_linear
+from mrfpe.models.mixing import statistics_tau
 from mrfpe.models.simulate import simulate
 from mrfpe.validation import check_positive_int, check_seed
 
@@ -57,18 +58,9 @@ def statistic_chain(design: Design, psi: np.ndarray, columns: np.ndarray, n_swee
 
 
 def _tau(s: np.ndarray) -> float:
-    """The largest integrated autocorrelation time of the columns of ``s`` (emcee's)."""
-    import logging
-
-    from emcee.autocorr import integrated_time
-
-    logging.getLogger("emcee.autocorr").setLevel(logging.ERROR)  # short chains are judged here
-    sd = s.std(axis=0)
-    moving = sd > 0
-    if not moving.any():
-        return 1.0
-    z = (s[:, moving] - s[:, moving].mean(axis=0)) / sd[moving]
-    return max(1.0, float(np.max(integrated_time(z[:, None, :], quiet=True))))
+    """τ of a design point's statistics (:func:`~mrfpe.models.mixing.statistics_tau`), at
+    least one sweep."""
+    return max(1.0, statistics_tau(s))
 
 
 @dataclass(frozen=True)

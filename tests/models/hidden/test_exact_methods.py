@@ -12,11 +12,10 @@ import warnings
 
 import numpy as np
 import pytest
-from scipy.special import logsumexp
 
 import mrfpe
 from mrfpe import models
-from tests.models.hidden.transfer import gaussian_loglik, log_z_product
+from tests.models.hidden.transfer import coupling_posterior
 
 H, W, Q = 6, 40, 3
 MEANS, SD = (0.0, 1.0, 2.0), 0.6
@@ -30,13 +29,7 @@ def _data(beta: float, seed: int) -> np.ndarray:
 
 
 def _exact(y: np.ndarray) -> tuple[float, float]:
-    L = gaussian_loglik(y.ravel(), MEANS, SD)
-    grid = np.linspace(*BOUNDS, 501)
-    lp = np.array([log_z_product(H, W, Q, b, None, L) - log_z_product(H, W, Q, b)
-                   for b in grid])
-    w = np.exp(lp - logsumexp(lp))
-    m = float(w @ grid)
-    return m, float(np.sqrt(w @ (grid - m) ** 2))
+    return coupling_posterior(y, H, W, Q, MEANS, SD, np.linspace(*BOUNDS, 501))
 
 
 def _run(y: np.ndarray, method: str):

@@ -178,3 +178,16 @@ def log_z_product(H: int, W: int, q: int, coupling: float, field=None, L=None) -
         a = a / s
         total += np.log(s) + top
     return float(total)
+
+
+def coupling_posterior(y, H: int, W: int, q: int, means, sd, grid) -> tuple[float, float]:
+    """``(mean, sd)`` of the exact posterior of the Potts coupling (fields 0) under a flat
+    prior on ``grid``, a Gaussian emission known: ``p(y | β) = Z(β; L) / Z(β)`` by
+    :func:`log_z_product` at every grid point."""
+    L = gaussian_loglik(np.ravel(y), means, sd)
+    grid = np.asarray(grid, float)
+    lp = np.array([log_z_product(H, W, q, b, None, L) - log_z_product(H, W, q, b)
+                   for b in grid])
+    w = np.exp(lp - logsumexp(lp))
+    m = float(w @ grid)
+    return m, float(np.sqrt(w @ (grid - m) ** 2))

@@ -20,17 +20,26 @@ from mrfpe.threads import configure_vector_width
 
 configure_vector_width()  # before our first @njit, as mrfpe.models.simulate does
 
+__all__ = ["splitmix64"]
+
 _GAMMA, _MIX1, _MIX2 = (np.uint64(0x9E3779B97F4A7C15), np.uint64(0xBF58476D1CE4E5B9),
                         np.uint64(0x94D049BB133111EB))
 
 
 @njit(inline="always", cache=True)
-def _uniform(key: np.uint64, k: int) -> float:
-    """Output ``k`` of SplitMix64 seeded ``key``, in [0, 1) (53 bits)."""
-    z = key + np.uint64(k) * _GAMMA
+def splitmix64(key: np.uint64, ctr: np.uint64) -> np.uint64:
+    """Output ``ctr`` of SplitMix64 seeded ``key``: 64 random bits (Steele, Lea & Flood
+    2014), the counter-based stream of every kernel here and of the multi-spin sweeps."""
+    z = key + ctr * _GAMMA
     z = (z ^ (z >> np.uint64(30))) * _MIX1
     z = (z ^ (z >> np.uint64(27))) * _MIX2
-    return np.int64((z ^ (z >> np.uint64(31))) >> np.uint64(11)) * 1.1102230246251565e-16
+    return z ^ (z >> np.uint64(31))
+
+
+@njit(inline="always", cache=True)
+def _uniform(key: np.uint64, k: int) -> float:
+    """Output ``k`` of SplitMix64 seeded ``key``, in [0, 1) (53 bits)."""
+    return np.int64(splitmix64(key, np.uint64(k)) >> np.uint64(11)) * 1.1102230246251565e-16
 
 
 @njit(inline="always", cache=True)

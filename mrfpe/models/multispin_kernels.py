@@ -19,29 +19,19 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from mrfpe.models.gibbs_sites import splitmix64 as _word
 from mrfpe.threads import configure_vector_width
 
 configure_vector_width()  # before our first @njit, as mrfpe.models.simulate does
 
 __all__ = ["AHEAD", "sweeps"]
 
-_GAMMA, _MIX1, _MIX2 = (np.uint64(0x9E3779B97F4A7C15), np.uint64(0xBF58476D1CE4E5B9),
-                        np.uint64(0x94D049BB133111EB))
 #: Digits of every site done in vectorised loops over a row (random words included): a
 #: site's 64 replicas need about 7.3 on average and are all decided within 12 with
 #: probability 0.985; the rest finish one by one.
 AHEAD = 12
 _ZERO, _ONE = np.uint64(0), np.uint64(1)
 _TWO64 = 18446744073709551616.0
-
-
-@njit(inline="always", cache=True)
-def _word(key: np.uint64, ctr: np.uint64) -> np.uint64:
-    """Output ``ctr`` of SplitMix64 seeded ``key``: 64 random bits."""
-    z = key + ctr * _GAMMA
-    z = (z ^ (z >> np.uint64(30))) * _MIX1
-    z = (z ^ (z >> np.uint64(27))) * _MIX2
-    return z ^ (z >> np.uint64(31))
 
 
 @njit(inline="always", cache=True)
